@@ -1,0 +1,1 @@
+"""hasel_control: rclpy nodes of the HASEL toolkit (see package.xml)."""

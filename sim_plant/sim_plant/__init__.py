@@ -1,0 +1,1 @@
+"""sim_plant: rclpy nodes of the HASEL toolkit (see package.xml)."""

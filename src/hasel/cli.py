@@ -1,0 +1,125 @@
+"""``hasel``: the one command in front of every job.
+
+Each subcommand is a row of :data:`COMMANDS`: its options are declared here (so
+``hasel --help`` is instant and needs no ROS), its work is a plain function
+``run(args) -> int`` imported only when that subcommand runs. Commands that drive the
+node graph live in the ament package ``hasel_sysid``; offline ones in this core.
+
+Exit codes: 0 success; 2 bad input (one line on stderr, no traceback); 1 other failure.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from hasel.errors import BadInputError, HaselError
+
+__all__ = ["main", "COMMANDS", "build_parser"]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line and exit code 2 (no usage dump)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"hasel {self.prog.split()[-1]}: error: {message}\n")
+        raise SystemExit(2)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A subcommand: name, one-line help, its options, where its work lives, whether it needs ROS."""
+
+    name: str
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    target: str  # "module:function"
+    needs_ros: bool
+
+
+def _no_args(p: argparse.ArgumentParser) -> None:
+    del p
+
+
+def _demo_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", default="out/demo", help="directory for the demo's files (default out/demo)")
+    p.add_argument("--quick", action="store_true", help="shorter runs (for CI smoke tests)")
+
+
+def _env_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("argv", nargs=argparse.REMAINDER, help="command to run (after --)")
+
+
+def run_env(args: argparse.Namespace) -> int:
+    """Run a command in the workspace's ROS environment (as if install/setup.bash were sourced)."""
+    import os
+
+    argv = list(args.argv)
+    if argv[:1] == ["--"]:
+        argv = argv[1:]
+    if not argv:
+        raise BadInputError("no command given: hasel env -- CMD [ARGS...]")
+    try:
+        os.execvp(argv[0], argv)
+    except FileNotFoundError as err:
+        raise BadInputError(f"command not found: {argv[0]}") from err
+    return 1
+
+
+COMMANDS: list[Command] = [
+    Command("env", "run a command in the workspace's ROS environment: hasel env -- CMD",
+            _env_args, "hasel.cli:run_env", True),
+    Command("demo", "the end-to-end demo that `make demo` runs", _demo_args, "hasel_sysid.demo:run", True),
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hasel`` with every subcommand."""
+    parser = _Parser(prog="hasel", description="HASEL soft-actuator toolkit: closed loop, "
+                     "MCAP logs, identification and sim-to-real gap diagnosis (mm, kV, s).")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for cmd in COMMANDS:
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
+        cmd.add_arguments(p)
+        p.set_defaults(_command=cmd)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    cmd: Command | None = getattr(args, "_command", None)
+    if cmd is None:
+        parser.print_help()
+        return 0
+    if cmd.needs_ros:
+        from hasel.rosenv import ensure_ros_environment
+
+        ensure_ros_environment()
+    module, func = cmd.target.split(":")
+    try:
+        run = getattr(importlib.import_module(module), func)
+        return int(run(args) or 0)
+    except BadInputError as err:
+        sys.stderr.write(f"hasel {cmd.name}: error: {err}\n")
+        return 2
+    except HaselError as err:
+        sys.stderr.write(f"hasel {cmd.name}: failed: {err}\n")
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write(f"hasel {cmd.name}: interrupted\n")
+        return 130
+    except ModuleNotFoundError as err:
+        if cmd.needs_ros and err.name and err.name.split(".")[0] in {
+                "rclpy", "hasel_sysid", "hasel_msgs", "hasel_driver", "hasel_control", "sim_plant"}:
+            sys.stderr.write(f"hasel {cmd.name}: needs the built ROS workspace ({err.name} not found); "
+                             "run `make setup`\n")
+            return 1
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())
