@@ -1,0 +1,109 @@
+"""The simulated actuator: amplifier, its 500 Hz analog filter and the paper's P(s).
+
+Signal chain (paper Fig. 1/5): the controller's command in kV is what the DAC and the
+5 kV/V amplifier deliver (the DAC volts are command/5); the amplified voltage passes a
+2nd-order 500 Hz analog low-pass (modelled as Butterworth) and reaches the actuator,
+whose stroke follows P(s) (17). The command is piecewise constant at the simulator's
+rate (10 kHz), so both paths, command -> applied voltage and command -> stroke, are
+discretised exactly by zero-order hold.
+
+Every actuator model obeys :class:`Actuator`, so a variant with unmodelled effects
+(the "truth" plant) drops in wherever the nominal one is used.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from hasel import paper
+from hasel.lti import SosFilter, butter2_analog, zoh_sos
+from hasel.validate import positive
+
+__all__ = ["Actuator", "ActuatorSamples", "NominalConfig", "NominalActuator", "amplifier_sos"]
+
+
+@dataclass(frozen=True)
+class ActuatorSamples:
+    """Samples of one run of an actuator model, all at its rate.
+
+    Attributes
+    ----------
+    applied_kv : ndarray
+        Voltage on the actuator after the amplifier's filter, kV.
+    stroke_mm : ndarray
+        True stroke of the actuator, mm.
+    """
+
+    applied_kv: np.ndarray
+    stroke_mm: np.ndarray
+
+
+@runtime_checkable
+class Actuator(Protocol):
+    """What the simulator needs of an actuator model (nominal or with effects)."""
+
+    rate_hz: float
+
+    def reset(self, command_kv: float = 0.0) -> None:
+        """Put the model at rest with ``command_kv`` applied forever."""
+
+    def run(self, command_kv: np.ndarray) -> ActuatorSamples:
+        """Advance by ``len(command_kv)`` samples of the commanded voltage (kV)."""
+
+
+@dataclass(frozen=True)
+class NominalConfig:
+    """Parameters of the nominal actuator (defaults: the paper's).
+
+    Attributes
+    ----------
+    num, den : tuple of float
+        P(s), kV -> mm, descending powers of s (rad/s).
+    rate_hz : float
+        Simulation rate, Hz (10 kHz: the paper's sampling rate).
+    amp_filter_hz : float
+        Cut-off of the amplifier's 2nd-order Butterworth low-pass, Hz.
+    """
+
+    num: tuple[float, ...] = field(default_factory=lambda: tuple(paper.plant_tf()[0]))
+    den: tuple[float, ...] = field(default_factory=lambda: tuple(paper.plant_tf()[1]))
+    rate_hz: float = paper.PLANT_RATE_HZ
+    amp_filter_hz: float = paper.AMP_FILTER_HZ
+
+
+def amplifier_sos(cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """ZOH model of the amplifier's analog low-pass (unity gain in kV), as SOS."""
+    num, den = butter2_analog(cutoff_hz)
+    return zoh_sos(num, den, 1.0 / positive("rate_hz", rate_hz))
+
+
+class NominalActuator:
+    """The paper's linear model: command kV -> 500 Hz filter -> P(s) -> stroke mm.
+
+    Parameters
+    ----------
+    config : NominalConfig, optional
+        Model parameters; the paper's by default.
+    """
+
+    def __init__(self, config: NominalConfig | None = None) -> None:
+        self.config = config or NominalConfig()
+        self.rate_hz = float(self.config.rate_hz)
+        dt = 1.0 / self.rate_hz
+        amp_num, amp_den = butter2_analog(self.config.amp_filter_hz)
+        chain_num = np.polymul(amp_num, self.config.num)
+        chain_den = np.polymul(amp_den, self.config.den)
+        self._amp = SosFilter(zoh_sos(amp_num, amp_den, dt))
+        self._chain = SosFilter(zoh_sos(chain_num, chain_den, dt))
+
+    def reset(self, command_kv: float = 0.0) -> None:
+        """At rest with ``command_kv`` (kV) applied forever."""
+        self._amp.reset(command_kv)
+        self._chain.reset(command_kv)
+
+    def run(self, command_kv: np.ndarray) -> ActuatorSamples:
+        """Advance by the samples of ``command_kv`` (kV, at ``rate_hz``)."""
+        u = np.asarray(command_kv, dtype=float)
+        return ActuatorSamples(applied_kv=self._amp.run(u), stroke_mm=self._chain.run(u))

@@ -1,0 +1,137 @@
+"""Sensor models: the laser displacement sensor and the capacitive strain sensor with its LMC555.
+
+Laser (ground truth): 3 mm/V analog output read by a 12-bit ADC over 0-3.3 V, so the
+stroke is quantised in steps of 3.3*3/4096 = 2.4 um, plus a small vibration noise.
+
+Strain sensor: capacitance proportional to stretch, C = lambda C0 (paper eq. 13), with
+the stretch growing linearly with stroke. An LMC555 in monostable mode, triggered at
+4.5 kHz, turns C into a pulse of width 1.1 R C; the MCU times it with edge interrupts
+(the "elapsed time", microseconds), so a reading exists every 1/4.5 kHz and the MCU
+reports the latest one. Because the sensor sits in the actuator's field, its noise
+grows with the applied voltage (paper section V.B); the timer's clock quantises it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hasel import paper
+from hasel.validate import positive
+
+__all__ = ["LaserConfig", "LaserSensor", "StrainConfig", "StrainSensor"]
+
+
+@dataclass(frozen=True)
+class LaserConfig:
+    """Laser displacement sensor and its ADC.
+
+    Attributes: ``mm_per_v`` output scale (mm/V); ``adc_bits``; ``full_scale_v`` ADC
+    range (V); ``noise_mm`` standard deviation of vibration noise (mm).
+    """
+
+    mm_per_v: float = paper.LASER_MM_PER_V
+    adc_bits: int = paper.ADC_BITS
+    full_scale_v: float = paper.ADC_FULL_SCALE_V
+    noise_mm: float = 0.003
+
+
+class LaserSensor:
+    """Stroke (mm) -> laser reading (mm) as the 12-bit ADC sees it."""
+
+    def __init__(self, config: LaserConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self.rng = rng
+        self.lsb_mm = config.full_scale_v * config.mm_per_v / (2**config.adc_bits)
+        self.max_code = 2**config.adc_bits - 1
+
+    def measure(self, stroke_mm: np.ndarray) -> np.ndarray:
+        """Quantised, noisy readings (mm) of the true strokes ``stroke_mm`` (mm)."""
+        z = np.asarray(stroke_mm, float) + self.config.noise_mm * self.rng.standard_normal(np.size(stroke_mm))
+        code = np.clip(np.round(z / self.lsb_mm), 0, self.max_code)
+        return code * self.lsb_mm
+
+
+@dataclass(frozen=True)
+class StrainConfig:
+    """Capacitive strain sensor and LMC555 read-out.
+
+    Attributes
+    ----------
+    rest_pulse_us : float
+        Pulse width 1.1 R C0 at zero stroke, us.
+    stretch_per_mm : float
+        Sensor stretch per mm of stroke (lambda = 1 + stretch_per_mm * z).
+    trigger_hz : float
+        555 trigger rate, Hz (4.5 kHz).
+    tick_us : float
+        Resolution of the MCU's edge timer, us.
+    noise_us : float
+        Noise of a reading at 0 kV, us (standard deviation).
+    noise_us_per_kv : float
+        Extra noise per kV applied (field coupling into the sensor), us/kV.
+    """
+
+    rest_pulse_us: float = 100.0
+    stretch_per_mm: float = 0.025
+    trigger_hz: float = paper.TIMER_TRIGGER_HZ
+    tick_us: float = 1.0 / 60.0
+    noise_us: float = 0.01
+    noise_us_per_kv: float = 0.012
+
+    @property
+    def us_per_mm(self) -> float:
+        """Ideal sensitivity of the reading, us per mm."""
+        return self.rest_pulse_us * self.stretch_per_mm
+
+
+class StrainSensor:
+    """True stroke (mm) and applied voltage (kV) at the simulator's rate -> 555 elapsed times (us).
+
+    Readings are taken at the trigger instants (4.5 kHz) and held until the next one,
+    so the output at each simulator sample is the latest reading the MCU has.
+    """
+
+    def __init__(self, config: StrainConfig, rate_hz: float, rng: np.random.Generator) -> None:
+        self.config = config
+        self.rng = rng
+        self.dt = 1.0 / positive("rate_hz", rate_hz)
+        self.trigger_period = 1.0 / positive("trigger_hz", config.trigger_hz)
+        self._t = 0.0          # time of the next simulator sample, s
+        self._next_trigger = 0.0
+        self._last_us = config.rest_pulse_us
+
+    def ideal_us(self, stroke_mm: np.ndarray) -> np.ndarray:
+        """Noise-free pulse width (us) for strokes in mm: 1.1 R C0 (1 + k z)."""
+        c = self.config
+        return c.rest_pulse_us * (1.0 + c.stretch_per_mm * np.asarray(stroke_mm, float))
+
+    def measure(self, stroke_mm: np.ndarray, applied_kv: np.ndarray) -> np.ndarray:
+        """Latest elapsed time (us) at each simulator sample of ``stroke_mm``/``applied_kv``."""
+        z = np.asarray(stroke_mm, float)
+        v = np.asarray(applied_kv, float)
+        n = z.size
+        t = self._t + self.dt * np.arange(n)
+        # trigger instants inside this block and the sample index where each lands
+        k0 = int(np.ceil((self._next_trigger - self._t) / self.trigger_period - 1e-9)) if n else 0
+        trig = self._next_trigger + self.trigger_period * np.arange(
+            max(0, int(np.floor((t[-1] - self._next_trigger) / self.trigger_period + 1e-9)) + 1) if n else 0)
+        del k0
+        out = np.empty(n)
+        if trig.size:
+            idx = np.minimum(np.searchsorted(t, trig - 1e-12), n - 1)
+            c = self.config
+            sigma = c.noise_us + c.noise_us_per_kv * np.abs(v[idx])
+            reading = self.ideal_us(z[idx]) + sigma * self.rng.standard_normal(trig.size)
+            reading = np.round(reading / c.tick_us) * c.tick_us
+            # hold each reading from its sample until the next reading
+            held = np.full(n, -1, dtype=int)
+            held[idx] = np.arange(trig.size)
+            held = np.maximum.accumulate(held)
+            out[:] = np.where(held >= 0, reading[np.maximum(held, 0)], self._last_us)
+            self._last_us = float(reading[-1])
+            self._next_trigger = float(trig[-1] + self.trigger_period)
+        else:
+            out[:] = self._last_us
+        self._t = float(t[-1] + self.dt) if n else self._t
+        return out
