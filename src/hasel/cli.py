@@ -34,8 +34,8 @@ class Command:
 
     name: str
     help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    target: str  # "module:function"
+    add_arguments: Callable[[argparse.ArgumentParser], None] | str  # or "module:function"
+    target: str  # "module:function" taking the parsed args, returning the exit code
     needs_ros: bool
 
 
@@ -72,6 +72,14 @@ COMMANDS: list[Command] = [
     Command("env", "run a command in the workspace's ROS environment: hasel env -- CMD",
             _env_args, "hasel.cli:run_env", True),
     Command("demo", "the end-to-end demo that `make demo` runs", _demo_args, "hasel_sysid.demo:run", True),
+    Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
+            "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False),
+    Command("diagnose", "sim-to-real gap diagnosis: where, which unmodelled effect, how far it shrinks",
+            "hasel.diagnose.cli:add_arguments", "hasel.diagnose.cli:run", False),
+    Command("info", "summary of an MCAP file (topics, types, counts, rates); what a damaged file still holds",
+            "hasel.io.cli:add_info_arguments", "hasel.io.cli:run_info", False),
+    Command("salvage", "rewrite the readable part of a damaged MCAP file as a valid one",
+            "hasel.io.cli:add_salvage_arguments", "hasel.io.cli:run_salvage", False),
 ]
 
 
@@ -82,7 +90,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for cmd in COMMANDS:
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
-        cmd.add_arguments(p)
+        add = cmd.add_arguments
+        if isinstance(add, str):
+            module, func = add.split(":")
+            try:
+                add = getattr(importlib.import_module(module), func)
+            except ImportError as err:  # a part of the toolkit that is not installed
+                p.description = f"{cmd.help} [unavailable: {err}]"
+                continue
+        add(p)
         p.set_defaults(_command=cmd)
     return parser
 
