@@ -90,7 +90,8 @@ def _ss_zeros(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.
     return w[np.isfinite(w) & (np.abs(w) < 1e12)]
 
 
-def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float) -> np.ndarray:
+def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
+            output: str = "start") -> np.ndarray:
     """Exact ZOH discretisation of ``num(s)/den(s)`` as second-order sections.
 
     The continuous system is realised as a series of low-order sections (well
@@ -105,6 +106,12 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float) -> np.ndarr
         Coefficients in descending powers of s (units of the system, s in rad/s).
     dt_s : float
         Sample period, seconds.
+    output : {"start", "end"}
+        ``"start"``: output n is the continuous output at t_n, when input n starts
+        (the usual discretisation; a strictly proper system then has a one-sample
+        delay). ``"end"``: output n is the output at t_{n+1}, after input n has been
+        held for one period (strictly proper systems only). A simulator stepping in
+        blocks uses ``"end"`` so that a block's last sample lands on the next tick.
 
     Returns
     -------
@@ -112,15 +119,21 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float) -> np.ndarr
         For :func:`scipy.signal.sosfilt`.
     """
     dt_s = positive("dt_s", dt_s)
+    if output not in ("start", "end"):
+        raise BadInputError(f"output must be 'start' or 'end', got {output!r}")
     num_a, den_a = _as_coeffs("num", num), _as_coeffs("den", den)
     if num_a.size > den_a.size:
         raise BadInputError("the transfer function must be proper (deg num <= deg den)")
+    if output == "end" and num_a.size == den_a.size:
+        raise BadInputError("output='end' needs a strictly proper transfer function")
     z, p, k = signal.tf2zpk(num_a, den_a)
     A, B, C, D = _series_ss(z, p, float(k))
     n = A.shape[0]
     M = np.zeros((n + 1, n + 1)); M[:n, :n] = A; M[:n, n:] = B
     E = linalg.expm(M * dt_s)
     Ad, Bd = E[:n, :n], E[:n, n:]
+    if output == "end":  # y_end[n] = C x[n+1] = C Ad x[n] + C Bd u[n]
+        C, D = C @ Ad, C @ Bd
     pd = linalg.eigvals(Ad)
     zd = _ss_zeros(Ad, Bd, C, D)
     dc = float((C @ np.linalg.solve(np.eye(n) - Ad, Bd) + D)[0, 0])
@@ -128,7 +141,7 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float) -> np.ndarr
     kd = dc * float(np.real(np.prod(1.0 - pd) / np.prod(1.0 - zd)))
     sos = signal.zpk2sos(zd, pd, kd)
     # zpk2sos pads missing zeros with zeros at z = 0, which would advance the output;
-    # the ZOH system has its relative degree as pure delay, so shift those sections.
+    # the discrete system has its relative degree as pure delay, so shift those sections.
     for _ in range(pd.size - zd.size):
         i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
         sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]

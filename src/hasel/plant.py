@@ -28,6 +28,8 @@ __all__ = ["Actuator", "ActuatorSamples", "NominalConfig", "NominalActuator", "a
 class ActuatorSamples:
     """Samples of one run of an actuator model, all at its rate.
 
+    Sample n is taken at the end of the n-th command sample, i.e. at t_0 + (n+1)/rate.
+
     Attributes
     ----------
     applied_kv : ndarray
@@ -76,7 +78,7 @@ class NominalConfig:
 def amplifier_sos(cutoff_hz: float, rate_hz: float) -> np.ndarray:
     """ZOH model of the amplifier's analog low-pass (unity gain in kV), as SOS."""
     num, den = butter2_analog(cutoff_hz)
-    return zoh_sos(num, den, 1.0 / positive("rate_hz", rate_hz))
+    return zoh_sos(num, den, 1.0 / positive("rate_hz", rate_hz), output="end")
 
 
 class NominalActuator:
@@ -95,8 +97,9 @@ class NominalActuator:
         amp_num, amp_den = butter2_analog(self.config.amp_filter_hz)
         chain_num = np.polymul(amp_num, self.config.num)
         chain_den = np.polymul(amp_den, self.config.den)
-        self._amp = SosFilter(zoh_sos(amp_num, amp_den, dt))
-        self._chain = SosFilter(zoh_sos(chain_num, chain_den, dt))
+        # outputs at the end of each held sample: a block's last sample is the next tick
+        self._amp = SosFilter(zoh_sos(amp_num, amp_den, dt, output="end"))
+        self._chain = SosFilter(zoh_sos(chain_num, chain_den, dt, output="end"))
 
     def reset(self, command_kv: float = 0.0) -> None:
         """At rest with ``command_kv`` (kV) applied forever."""

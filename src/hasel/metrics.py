@@ -1,0 +1,73 @@
+"""Step-response metrics as in the paper's Table II: 10-90 % rise, 5 % settling, overshoot."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence"]
+
+
+@dataclass(frozen=True)
+class StepMetrics:
+    """Metrics of one reference step. Times in seconds from the step's time; NaN if not reached."""
+
+    from_mm: float
+    to_mm: float
+    mode: str  # "activation" (increasing) or "relaxation"
+    rise_s: float
+    settling_s: float
+    overshoot_pct: float
+
+    def to_json(self) -> dict:
+        """JSON-ready dict (NaN becomes None)."""
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
+
+
+def step_metrics(t_s: np.ndarray, y: np.ndarray, t_step_s: float, t_end_s: float,
+                 from_mm: float, to_mm: float, band: float = 0.05) -> StepMetrics:
+    """Metrics of the response ``y`` (mm) to a step from ``from_mm`` to ``to_mm`` at ``t_step_s``.
+
+    Rise: time from the first crossing of 10 % to the first crossing of 90 % of the
+    step. Settling: time after the step when ``y`` last left the band of
+    ``band * |step|`` around ``to_mm`` (NaN if it never stays inside before
+    ``t_end_s``). Overshoot: largest excursion beyond ``to_mm``, % of the step.
+    """
+    t, y = np.asarray(t_s, float), np.asarray(y, float)
+    sel = (t >= t_step_s) & (t < t_end_s)
+    tt, yy = t[sel] - t_step_s, y[sel]
+    delta = to_mm - from_mm
+    mode = "activation" if delta > 0 else "relaxation"
+    if delta == 0 or tt.size == 0:
+        return StepMetrics(from_mm, to_mm, mode, math.nan, math.nan, math.nan)
+    progress = (yy - from_mm) / delta  # 0 at start, 1 at target, in either direction
+
+    def first_cross(level: float) -> float:
+        idx = np.flatnonzero(progress >= level)
+        if idx.size == 0:
+            return math.nan
+        i = int(idx[0])
+        if i == 0:
+            return float(tt[0])
+        # linear interpolation between the samples around the crossing
+        p0, p1 = progress[i - 1], progress[i]
+        return float(tt[i - 1] + (level - p0) / (p1 - p0) * (tt[i] - tt[i - 1]))
+
+    rise = first_cross(0.9) - first_cross(0.1)
+    outside = np.flatnonzero(np.abs(yy - to_mm) > band * abs(delta))
+    if outside.size == 0:
+        settling = 0.0
+    elif outside[-1] == tt.size - 1:
+        settling = math.nan
+    else:
+        settling = float(tt[outside[-1] + 1])
+    overshoot = max(0.0, float(np.max(progress) - 1.0)) * 100.0
+    return StepMetrics(from_mm, to_mm, mode, rise, settling, overshoot)
+
+
+def steps_from_sequence(t_s: np.ndarray, y: np.ndarray, sequence_mm: list[float],
+                        hold_s: float) -> list[StepMetrics]:
+    """Metrics of each step of a reference held ``hold_s`` per value (the first value is the start)."""
+    return [step_metrics(t_s, y, i * hold_s, (i + 1) * hold_s, sequence_mm[i - 1], sequence_mm[i])
+            for i in range(1, len(sequence_mm))]
