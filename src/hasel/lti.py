@@ -16,7 +16,7 @@ from scipy import linalg, signal
 from hasel.errors import BadInputError
 from hasel.validate import positive
 
-__all__ = ["zoh_sos", "butter2_analog", "SosFilter", "tf_freqresp", "is_stable"]
+__all__ = ["zoh_sos", "butter2_analog", "critical2_analog", "SosFilter", "tf_freqresp", "is_stable"]
 
 
 def _as_coeffs(name: str, c: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -146,6 +146,17 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
         i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
         sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
     return sos
+
+
+def critical2_analog(cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unity-gain 2nd-order low-pass with a double real pole, -3 dB at ``cutoff_hz`` (analog).
+
+    H(s) = a^2 / (s + a)^2 with a = wc / sqrt(sqrt(2) - 1). Its impulse response is
+    non-negative, so its output always lies between the smallest and the largest
+    input it has seen: it cannot overshoot.
+    """
+    a = 2.0 * np.pi * positive("cutoff_hz", cutoff_hz) / np.sqrt(np.sqrt(2.0) - 1.0)
+    return np.array([a * a]), np.array([1.0, 2.0 * a, a * a])
 
 
 def butter2_analog(cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:

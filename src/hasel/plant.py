@@ -2,7 +2,7 @@
 
 Signal chain (paper Fig. 1/5): the controller's command in kV is what the DAC and the
 5 kV/V amplifier deliver (the DAC volts are command/5); the amplified voltage passes a
-2nd-order 500 Hz analog low-pass (modelled as Butterworth) and reaches the actuator,
+2nd-order 500 Hz analog low-pass and reaches the actuator,
 whose stroke follows P(s) (17). The command is piecewise constant at the simulator's
 rate (10 kHz), so both paths, command -> applied voltage and command -> stroke, are
 discretised exactly by zero-order hold.
@@ -18,10 +18,10 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from hasel import paper
-from hasel.lti import SosFilter, butter2_analog, zoh_sos
+from hasel.lti import SosFilter, critical2_analog, zoh_sos
 from hasel.validate import positive
 
-__all__ = ["Actuator", "ActuatorSamples", "NominalConfig", "NominalActuator", "amplifier_sos"]
+__all__ = ["Actuator", "ActuatorSamples", "NominalConfig", "NominalActuator", "amplifier_sos", "amplifier_filter_tf"]
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class NominalConfig:
     rate_hz : float
         Simulation rate, Hz (10 kHz: the paper's sampling rate).
     amp_filter_hz : float
-        Cut-off of the amplifier's 2nd-order Butterworth low-pass, Hz.
+        -3 dB frequency of the amplifier's 2nd-order output filter, Hz.
     """
 
     num: tuple[float, ...] = field(default_factory=lambda: tuple(paper.plant_tf()[0]))
@@ -77,8 +77,21 @@ class NominalConfig:
 
 def amplifier_sos(cutoff_hz: float, rate_hz: float) -> np.ndarray:
     """ZOH model of the amplifier's analog low-pass (unity gain in kV), as SOS."""
-    num, den = butter2_analog(cutoff_hz)
+    num, den = amplifier_filter_tf(cutoff_hz)
     return zoh_sos(num, den, 1.0 / positive("rate_hz", rate_hz), output="end")
+
+
+def amplifier_filter_tf(cutoff_hz: float = paper.AMP_FILTER_HZ) -> tuple[np.ndarray, np.ndarray]:
+    """The high-voltage output filter, analog: (num, den), unity gain in kV.
+
+    The paper gives only "2nd-order, 500 Hz". At kilovolts such a filter is a passive
+    RC-RC ladder (an active filter cannot sit behind a 5 kV/V amplifier), whose poles
+    are real; it is modelled with a double real pole, -3 dB at 500 Hz. That choice
+    matters for safety: a Butterworth (Q = 0.707) filter would overshoot a 9 kV
+    command step to 9.4 kV on the actuator, while this one never leaves the range of
+    the commands it received.
+    """
+    return critical2_analog(cutoff_hz)
 
 
 class NominalActuator:
@@ -94,7 +107,7 @@ class NominalActuator:
         self.config = config or NominalConfig()
         self.rate_hz = float(self.config.rate_hz)
         dt = 1.0 / self.rate_hz
-        amp_num, amp_den = butter2_analog(self.config.amp_filter_hz)
+        amp_num, amp_den = amplifier_filter_tf(self.config.amp_filter_hz)
         chain_num = np.polymul(amp_num, self.config.num)
         chain_den = np.polymul(amp_den, self.config.den)
         # outputs at the end of each held sample: a block's last sample is the next tick
