@@ -48,6 +48,27 @@ def _demo_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="shorter runs (for CI smoke tests)")
 
 
+def _steps_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sequence", default="2,4,6,4,2", help="stroke references, mm, comma-separated (default 2,4,6,4,2)")
+    p.add_argument("--hold", type=float, default=1.0, help="seconds per reference (default 1)")
+    p.add_argument("--feedback", choices=["laser", "strain"], default="laser", help="feedback sensor (default laser)")
+    p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
+    p.add_argument("--calibration", default=None, help="strain-sensor calibration YAML (from hasel calibrate)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--record", metavar="FILE.mcap", default=None, help="record every topic to this MCAP file")
+    p.add_argument("--json", metavar="FILE", default=None, help="write the step metrics as JSON")
+    p.add_argument("--plot", metavar="FILE.png", default=None, help="write a plot of the run")
+
+
+def _calibrate_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--points", default="2,3,4,5,6,7", help="strokes to hold, mm (default 2,3,4,5,6,7)")
+    p.add_argument("--hold", type=float, default=1.0, help="seconds per point (default 1)")
+    p.add_argument("--degree", type=int, choices=[1, 2, 3], default=1, help="polynomial degree (default 1: a line)")
+    p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
+    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--out", default="calibration.yaml", help="calibration YAML to write (default calibration.yaml)")
+
+
 def _env_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("argv", nargs=argparse.REMAINDER, help="command to run (after --)")
 
@@ -71,6 +92,10 @@ def run_env(args: argparse.Namespace) -> int:
 COMMANDS: list[Command] = [
     Command("env", "run a command in the workspace's ROS environment: hasel env -- CMD",
             _env_args, "hasel.cli:run_env", True),
+    Command("steps", "closed-loop step test through the node graph on the simulated plant",
+            _steps_args, "hasel_sysid.steps:run", True),
+    Command("calibrate", "strain-sensor calibration against the laser (1 mm steps, 2-7 mm)",
+            _calibrate_args, "hasel_sysid.calibrate:run", True),
     Command("demo", "the end-to-end demo that `make demo` runs", _demo_args, "hasel_sysid.demo:run", True),
     Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
             "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False),

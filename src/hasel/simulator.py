@@ -98,15 +98,24 @@ class PlantSimulator:
         """The sensors' readings at the current tick."""
         return self._latest
 
-    def step(self, command_kv: float) -> PlantBlock:
-        """Hold ``command_kv`` (the amplifier's input, kV) for one period; advance one tick."""
+    def step(self, command_kv: float | np.ndarray) -> PlantBlock:
+        """Apply one period of amplifier input (kV) and advance one tick.
+
+        ``command_kv`` is either one value held for the period (closed loop) or
+        ``samples_per_period`` values at the simulator's rate (open-loop waveforms).
+        """
         n = self.samples_per_period
-        out = self.actuator.run(np.full(n, float(command_kv)))
+        cmd = np.asarray(command_kv, dtype=float)
+        if cmd.ndim == 0:
+            cmd = np.full(n, float(cmd))
+        elif cmd.shape != (n,):
+            raise BadInputError(f"a period needs {n} command samples, got {cmd.shape}")
+        out = self.actuator.run(cmd)
         z = out.stroke_mm
         laser = self.laser.measure(z)
         z_sensor = z if self.strain_curve is None else self.strain_curve(z)
         elapsed = self.strain.measure(z_sensor, out.applied_kv)
-        block = PlantBlock(self.t_s, self.dt_s, float(command_kv), out.applied_kv, z, laser, elapsed)
+        block = PlantBlock(self.t_s, self.dt_s, float(cmd[-1]), out.applied_kv, z, laser, elapsed)
         self.tick += 1
         self._latest = Readings(self.t_s, float(laser[-1]), float(elapsed[-1]),
                                 float(out.applied_kv[-1]), float(z[-1]))

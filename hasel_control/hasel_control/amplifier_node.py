@@ -1,0 +1,128 @@
+"""High-voltage amplifier command node: the last software stage before the actuator.
+
+It turns requests into the command the 5 kV/V amplifier receives, under the rules of
+:mod:`hasel.amplifier`: a hard 9 kV ceiling no parameter can raise (parameters above
+it are rejected with the reason), non-finite requests give 0 kV, requests are clamped
+to [v_min_kv, v_max_kv], no fresh request for more than ``watchdog_periods`` loop
+periods gives 0 kV, and shutdown commands 0 kV. It publishes every applied command on
+``/amp/applied`` (or ``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a
+``diagnostic_msgs`` status whenever the clamp or the watchdog acts.
+
+The paper's -1 kV charge reversal is a separate, deliberate request on
+``/amp/precondition`` (bounded to [-2, 0] kV); the controller's path cannot produce a
+negative voltage because v_min_kv cannot be negative.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+
+from hasel import paper
+from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
+from hasel_driver.rosutil import declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
+from hasel_msgs.msg import SampleBatch, VoltageCommand
+
+__all__ = ["HvAmplifierNode", "main"]
+
+
+class HvAmplifierNode(Node):
+    """The amplifier command node. Parameters: v_min_kv, v_max_kv (<= 9), watchdog_periods, period_s."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("hv_amplifier", **kwargs)
+        v_min = declare(self, "v_min_kv", 0.0, "lowest command, kV (>= 0)", lo=0.0, hi=HARD_CEILING_KV)
+        v_max = declare(self, "v_max_kv", HARD_CEILING_KV, "highest command, kV (hard ceiling 9 kV)",
+                        lo=0.0, hi=HARD_CEILING_KV)
+        self.period_s = declare(self, "period_s", paper.LOOP_PERIOD_S, "loop period, s", lo=1e-4, hi=1.0,
+                                read_only=True)
+        periods = declare(self, "watchdog_periods", 3.0, "periods without a command before 0 kV",
+                          lo=1.0, hi=10.0)
+        self.limits = HvLimits(v_min, v_max)
+        self.watchdog = Watchdog(self.period_s, periods)
+        self.add_on_set_parameters_callback(validate_with(self._on_params))
+        self.output_kv = 0.0
+        self.last_reason = Reason.NONE
+        self.tripped = False
+        self.applied_pub = self.create_publisher(VoltageCommand, "/amp/applied", topic_qos("/amp/applied"))
+        self.batch_pub = self.create_publisher(SampleBatch, "/amp/applied_batch", topic_qos("/amp/applied_batch"))
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
+        self.create_subscription(VoltageCommand, "/amp/command", self.on_command, topic_qos("/amp/command"))
+        self.create_subscription(SampleBatch, "/amp/command_batch", self.on_batch, topic_qos("/amp/command_batch"))
+        self.create_subscription(VoltageCommand, "/amp/precondition", self.on_precondition,
+                                 topic_qos("/amp/precondition"))
+        self.create_timer(self.period_s, self.on_watchdog)
+
+    def _on_params(self, new: dict) -> None:
+        """Reject unsafe limits with the reason (HvLimits raises); apply safe ones."""
+        limits = HvLimits(new.get("v_min_kv", self.limits.v_min_kv), new.get("v_max_kv", self.limits.v_max_kv))
+        periods = new.get("watchdog_periods", self.watchdog.periods)
+        self.limits = limits
+        self.watchdog.periods = float(periods)
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _publish(self, stamp, requested: float, applied: float, reason: int) -> None:
+        msg = VoltageCommand(requested_kv=requested, applied_kv=applied, clamped=reason != Reason.NONE,
+                             reason=reason)
+        msg.header.stamp = stamp
+        self.output_kv = applied
+        self.applied_pub.publish(msg)
+        if reason != self.last_reason and reason not in (Reason.NONE, Reason.PRECONDITION):
+            level = DiagnosticStatus.ERROR if reason in (Reason.WATCHDOG, Reason.NONFINITE) else DiagnosticStatus.WARN
+            self.diag_pub.publish(diagnostic(self, level, f"output limited: {Reason.NAMES[reason]}",
+                                             from_stamp(stamp), requested_kv=requested, applied_kv=applied))
+        self.last_reason = reason
+
+    def on_command(self, msg: VoltageCommand) -> None:
+        """A 200 Hz request from the controller: limit it and pass it on with its stamp."""
+        self.watchdog.feed(self._now())
+        self.tripped = False
+        out = self.limits.apply(msg.requested_kv)
+        self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
+
+    def on_batch(self, msg: SampleBatch) -> None:
+        """An open-loop 10 kHz request: every sample limited (NaN/inf -> 0 kV)."""
+        self.watchdog.feed(self._now())
+        self.tripped = False
+        req = np.asarray(msg.voltage_kv, dtype=float)
+        applied = np.clip(np.nan_to_num(req, nan=0.0, posinf=0.0, neginf=0.0),
+                          self.limits.v_min_kv, self.limits.v_max_kv)
+        out = SampleBatch(header=msg.header, sample_period_s=msg.sample_period_s, voltage_kv=applied.tolist())
+        self.batch_pub.publish(out)
+        n_limited = int(np.count_nonzero(applied != req))
+        if n_limited:
+            self.diag_pub.publish(diagnostic(self, DiagnosticStatus.WARN, "batch samples limited",
+                                             from_stamp(msg.header.stamp), samples=n_limited,
+                                             max_requested_kv=float(np.nanmax(np.where(np.isfinite(req), req, 0)))))
+        self.output_kv = float(applied[-1]) if applied.size else 0.0
+
+    def on_precondition(self, msg: VoltageCommand) -> None:
+        """The deliberate charge reversal (bounded to [-2, 0] kV)."""
+        self.watchdog.feed(self._now())
+        self.tripped = False
+        out = HvLimits.precondition(msg.requested_kv)
+        self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
+
+    def on_watchdog(self) -> None:
+        """Every period: once commands have stopped for too long, command 0 kV each period."""
+        now = self._now()
+        if self.watchdog.last_s is None or not self.watchdog.expired(now):
+            return
+        self.tripped = True
+        self._publish(to_stamp(now), float("nan"), 0.0, Reason.WATCHDOG)
+
+    def on_shutdown(self) -> None:
+        """Leave the actuator at 0 kV."""
+        try:
+            self._publish(to_stamp(self._now()), float("nan"), 0.0, Reason.SHUTDOWN)
+        except Exception:  # noqa: BLE001 - the context may already be gone at exit
+            pass
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run hasel_control hv_amplifier``."""
+    return run_node(HvAmplifierNode, args)

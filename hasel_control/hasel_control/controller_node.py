@@ -1,0 +1,162 @@
+"""Dual-mode PID controller node at 200 Hz (paper section IV.B).
+
+Each feedback sample (one per 200 Hz tick, stamped with its measurement time) runs
+one update of :class:`hasel.pid.DualModePid`: e = r - z_hat, C+ for e >= 0, C- for
+e < 0, trapezoidal integral, backward-rectangular derivative, Ts = 0.005 s. The
+request goes to the amplifier node on ``/amp/command`` with the feedback's stamp,
+the state on ``/controller/state``.
+
+Feedback: ``feedback`` = "laser" (``/laser/stroke``) or "strain"
+(``/strain/stroke_filtered``, i.e. through the driver and the 40 Hz filter).
+References arrive on ``/reference`` stamped with the time they take effect, so a
+sequence can be published ahead of time and still be applied at exactly the right
+tick (deterministic in simulated time).
+
+Faults: a non-finite sample or no sample for ``stale_periods`` periods holds the
+integrator, sends no command (the amplifier's watchdog then drives 0 kV) and reports a
+diagnostic ERROR; when samples return, control resumes from the held integrator
+without a derivative kick.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+
+from hasel import paper
+from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
+from hasel_driver.rosutil import declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
+from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
+
+__all__ = ["PidControllerNode", "main", "FEEDBACK_TOPICS"]
+
+FEEDBACK_TOPICS = {"laser": "/laser/stroke", "strain": "/strain/stroke_filtered"}
+_GAIN_PARAMS = ("kp_plus", "ki_plus", "kd_plus", "kp_minus", "ki_minus", "kd_minus")
+
+
+class PidControllerNode(Node):
+    """The controller. Parameters: feedback, gains (kV/mm, kV/(mm s), kV s/mm), limits, anti_windup."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("pid_controller", **kwargs)
+        self.feedback = declare(self, "feedback", "laser", "feedback source: laser | strain", read_only=True)
+        if self.feedback not in FEEDBACK_TOPICS:
+            from hasel.errors import BadInputError
+
+            raise BadInputError(f"feedback must be one of {sorted(FEEDBACK_TOPICS)}, got {self.feedback!r}")
+        g = {}
+        for sign, gains in (("plus", paper.C_PLUS), ("minus", paper.C_MINUS)):
+            for name, default, unit in zip(("kp", "ki", "kd"), gains, ("kV/mm", "kV/(mm s)", "kV s/mm")):
+                g[f"{name}_{sign}"] = declare(self, f"{name}_{sign}", float(default),
+                                              f"C{'+' if sign == 'plus' else '-'} {name}, {unit}", lo=0.0, hi=1000.0)
+        period = declare(self, "period_s", paper.LOOP_PERIOD_S, "loop period Ts, s", lo=1e-4, hi=1.0, read_only=True)
+        v_min = declare(self, "v_min_kv", 0.0, "lowest command, kV", lo=0.0, hi=9.0)
+        v_max = declare(self, "v_max_kv", paper.V_MAX_KV, "highest command, kV (never above 9)", lo=0.0, hi=9.0)
+        aw = declare(self, "anti_windup", "conditional_integration", f"one of {', '.join(ANTI_WINDUP)}")
+        self.stale_periods = declare(self, "stale_periods", 3.0, "feedback age that counts as stale, periods",
+                                     lo=1.0, hi=100.0)
+        self.pid = DualModePid(self._config(g, period, v_min, v_max, aw))
+        self.add_on_set_parameters_callback(validate_with(self._on_params))
+
+        self.references: list[tuple[float, float]] = []  # (effective time s, stroke mm), sorted
+        self.last_feedback_s: float | None = None
+        self.stale = False
+        self.rejected = 0
+        self.cmd_pub = self.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
+        self.state_pub = self.create_publisher(ControllerState, "/controller/state", topic_qos("/controller/state"))
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
+        self.create_subscription(Stroke, FEEDBACK_TOPICS[self.feedback], self.on_feedback,
+                                 topic_qos(FEEDBACK_TOPICS[self.feedback]))
+        self.create_subscription(Reference, "/reference", self.on_reference, topic_qos("/reference"))
+        self.create_timer(period, self.on_watch)  # staleness check, on the ROS (maybe simulated) clock
+
+    def _config(self, g: dict, period: float, v_min: float, v_max: float, aw: str) -> DualModeConfig:
+        return DualModeConfig(plus=PidGains(g["kp_plus"], g["ki_plus"], g["kd_plus"]),
+                              minus=PidGains(g["kp_minus"], g["ki_minus"], g["kd_minus"]),
+                              period_s=period, v_min_kv=v_min, v_max_kv=v_max, anti_windup=aw)
+
+    def _on_params(self, new: dict) -> None:
+        """Validate and apply gain/limit changes at run time (raises with the reason)."""
+        cfg = self.pid.config
+        g = {"kp_plus": cfg.plus.kp, "ki_plus": cfg.plus.ki, "kd_plus": cfg.plus.kd,
+             "kp_minus": cfg.minus.kp, "ki_minus": cfg.minus.ki, "kd_minus": cfg.minus.kd}
+        g.update({k: v for k, v in new.items() if k in _GAIN_PARAMS})
+        candidate = self._config(g, cfg.period_s, new.get("v_min_kv", cfg.v_min_kv),
+                                 new.get("v_max_kv", cfg.v_max_kv), new.get("anti_windup", cfg.anti_windup))
+        self.pid.config = candidate
+
+    def reference_at(self, t_s: float) -> float:
+        """The reference (mm) in effect at ``t_s``; NaN before the first one."""
+        i = bisect.bisect_right(self.references, (t_s, math.inf)) - 1
+        return self.references[i][1] if i >= 0 else math.nan
+
+    def on_reference(self, msg: Reference) -> None:
+        """Schedule a reference at its stamp (a later message for the same time replaces it)."""
+        t = from_stamp(msg.header.stamp)
+        item = (t, float(msg.stroke_mm))
+        i = bisect.bisect_left(self.references, (t, -math.inf))
+        if i < len(self.references) and self.references[i][0] == t:
+            self.references[i] = item
+        else:
+            self.references.insert(i, item)
+
+    def on_feedback(self, msg: Stroke) -> None:
+        """One control update for one feedback sample."""
+        t = from_stamp(msg.header.stamp)
+        z = msg.stroke_mm
+        r = self.reference_at(t)
+        if not math.isfinite(z):
+            self.rejected += 1
+            self._set_stale(True, t, "non-finite feedback")
+            return
+        self.last_feedback_s = t
+        if self.stale:
+            self._set_stale(False, t, "feedback back")
+        if not math.isfinite(r):
+            # nothing to track yet: command 0 kV (alive, so the amplifier's watchdog stays calm)
+            self._publish_command(msg.header.stamp, 0.0)
+            return
+        out = self.pid.update(r, z)
+        self._publish_command(msg.header.stamp, out.output_kv)
+        st = ControllerState(reference_mm=r, measured_mm=z, error_mm=out.error_mm, mode=out.mode,
+                             p_term_kv=out.p_kv, i_term_kv=out.i_kv, d_term_kv=out.d_kv,
+                             output_kv=out.output_kv, saturated=out.saturated, input_stale=False,
+                             rejected_samples=self.rejected)
+        st.header.stamp = msg.header.stamp
+        self.state_pub.publish(st)
+
+    def _publish_command(self, stamp, kv: float) -> None:
+        cmd = VoltageCommand(requested_kv=kv, applied_kv=math.nan, clamped=False)
+        cmd.header.stamp = stamp
+        self.cmd_pub.publish(cmd)
+
+    def on_watch(self) -> None:
+        """Declare the feedback stale when it is older than ``stale_periods`` periods."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.last_feedback_s is None:
+            return
+        if now - self.last_feedback_s > self.stale_periods * self.pid.config.period_s + 1e-9:
+            self._set_stale(True, now, "no feedback")
+
+    def _set_stale(self, stale: bool, t_s: float, why: str) -> None:
+        if stale == self.stale:
+            return
+        self.stale = stale
+        if stale:
+            self.pid.hold()
+        level = DiagnosticStatus.ERROR if stale else DiagnosticStatus.OK
+        self.diag_pub.publish(diagnostic(self, level, f"feedback {'stale' if stale else 'ok'}: {why}", t_s,
+                                         integrator_kv=self.pid.i_kv, feedback=self.feedback))
+        st = ControllerState(reference_mm=self.reference_at(t_s), measured_mm=math.nan, error_mm=math.nan,
+                             mode=self.pid.mode, i_term_kv=self.pid.i_kv, output_kv=0.0, input_stale=stale,
+                             rejected_samples=self.rejected)
+        st.header.stamp = to_stamp(t_s)
+        self.state_pub.publish(st)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run hasel_control pid_controller``."""
+    return run_node(PidControllerNode, args)

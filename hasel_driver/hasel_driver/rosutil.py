@@ -1,0 +1,118 @@
+"""ROS plumbing shared by the toolkit's nodes: QoS, time stamps, parameters, diagnostics, main().
+
+Kept in hasel_driver, the lowest package of the graph; hasel_control, sim_plant and
+hasel_sysid import it. Arithmetic stays in the core library ``hasel``.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hasel.topics import QosSpec, topic
+
+__all__ = ["qos", "topic_qos", "to_stamp", "from_stamp", "declare", "diagnostic", "run_node",
+           "validate_with"]
+
+
+def qos(spec: QosSpec) -> QoSProfile:
+    """rclpy profile of a :class:`hasel.topics.QosSpec`."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
+        reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE)
+
+
+def topic_qos(name: str) -> QoSProfile:
+    """rclpy profile of one of the graph's default topics (see :mod:`hasel.topics`)."""
+    return qos(topic(name).qos)
+
+
+def to_stamp(t_s: float) -> Time:
+    """Seconds (float) -> builtin_interfaces/Time, rounded to the nearest nanosecond."""
+    ns = int(round(t_s * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def from_stamp(stamp: Time) -> float:
+    """builtin_interfaces/Time -> seconds (float)."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def declare(node: Node, name: str, default: Any, description: str, *,
+            lo: float | None = None, hi: float | None = None, read_only: bool = False) -> Any:
+    """Declare a parameter with a descriptor (and a range for numbers); return its value.
+
+    ``lo``/``hi`` become a FloatingPointRange (floats) or IntegerRange (ints), which
+    rclpy enforces on every later set.
+    """
+    desc = ParameterDescriptor(description=description, read_only=read_only)
+    if lo is not None and hi is not None:
+        if isinstance(default, bool):
+            pass
+        elif isinstance(default, int):
+            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+        elif isinstance(default, float):
+            desc.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return node.declare_parameter(name, default, desc).value
+
+
+def validate_with(check: Callable[[dict[str, Any]], None]) -> Callable[[list], SetParametersResult]:
+    """A parameter callback that accepts a change only if ``check(new values)`` does not raise.
+
+    ``check`` gets {name: value} of the parameters being set; any exception's text is
+    returned to the caller as the reason of the rejection.
+    """
+    def callback(params: list) -> SetParametersResult:
+        try:
+            check({p.name: p.value for p in params})
+        except Exception as err:  # noqa: BLE001 - the reason goes back to the caller
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+    return callback
+
+
+def diagnostic(node: Node, level: bytes, message: str, t_s: float, **values: Any) -> DiagnosticArray:
+    """A one-status DiagnosticArray named after ``node`` (level: DiagnosticStatus.OK/WARN/ERROR)."""
+    st = DiagnosticStatus(level=level, name=node.get_fully_qualified_name(), message=message,
+                          hardware_id="hasel")
+    st.values = [KeyValue(key=k, value=(f"{v:.6g}" if isinstance(v, float) and math.isfinite(v) else str(v)))
+                 for k, v in values.items()]
+    arr = DiagnosticArray(status=[st])
+    arr.header.stamp = to_stamp(t_s)
+    return arr
+
+
+def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
+    """Standard Jazzy main: init, spin one node, clean shutdown on Ctrl-C or SIGTERM."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception as err:  # noqa: BLE001 - a node start-up error is one line, not a traceback
+        from hasel.errors import BadInputError
+
+        if isinstance(err, BadInputError):
+            sys.stderr.write(f"error: {err}\n")
+            return 2
+        raise
+    finally:
+        if node is not None:
+            shutdown = getattr(node, "on_shutdown", None)
+            if shutdown is not None:
+                shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

@@ -1,0 +1,218 @@
+"""Simulated HASEL plant node: the paper's P(s) behind the amplifier, with its sensors.
+
+Inside, :class:`hasel.simulator.PlantSimulator` integrates the actuator at 10 kHz by
+exact zero-order hold (amplifier 5 kV/V and its 500 Hz output filter, then P(s)),
+and models the laser (3 mm/V, 12-bit ADC) and the capacitive strain sensor read by an
+LMC555 at 4.5 kHz with field-dependent noise. Per 200 Hz tick it publishes
+``/sensor/timing`` (555 elapsed time), ``/laser/stroke`` and the period's 10 kHz
+samples batched on ``/plant/batch``. It applies the amplifier node's output
+(``/amp/applied``: held for one period; ``/amp/applied_batch``: 10 kHz waveform).
+
+Clock modes (parameter ``clock_mode``):
+
+- ``sim``: the plant owns time. It publishes ``/clock`` and steps in lockstep: after
+  publishing tick k it waits for the amplifier output stamped t_k, then integrates one
+  period. The whole graph is deterministic and runs as fast as the machine allows.
+  If no output arrives within ``lockstep_timeout_s`` of wall time the plant steps
+  anyway, holding the last command as a DAC would, and after three missed periods
+  it models the MCU's own watchdog by applying 0 kV.
+- ``wall``: a steady timer steps the plant in real time with the latest command.
+
+Plant variants are pluggable (parameter ``variant``): see :func:`make_actuator`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from hasel import paper
+from hasel.errors import BadInputError
+from hasel.plant import Actuator, NominalActuator
+from hasel.sensors import LaserConfig, StrainConfig
+from hasel.simulator import PlantBlock, PlantSimulator
+from hasel_driver.rosutil import declare, run_node, topic_qos
+from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
+
+__all__ = ["PlantNode", "main", "VARIANTS", "make_actuator"]
+
+#: Plant variants: name -> factory(node parameters) -> Actuator. Later variants add effects.
+VARIANTS: dict[str, Callable[[dict], Actuator]] = {
+    "nominal": lambda params: NominalActuator(),
+}
+
+
+def make_actuator(variant: str, params: dict | None = None) -> Actuator:
+    """The actuator model of a variant name (BadInputError lists the known ones)."""
+    try:
+        factory = VARIANTS[variant]
+    except KeyError:
+        raise BadInputError(f"unknown plant variant {variant!r}; known: {', '.join(sorted(VARIANTS))}") from None
+    return factory(params or {})
+
+
+class PlantNode(Node):
+    """The plant. Parameters: clock_mode, variant, seed, noise levels, lockstep_timeout_s, stop_at_s."""
+
+    def __init__(self, actuator: Actuator | None = None, **kwargs) -> None:
+        super().__init__("sim_plant", **kwargs)
+        self.clock_mode = declare(self, "clock_mode", "sim", "sim (publish /clock, lockstep) | wall", read_only=True)
+        if self.clock_mode not in ("sim", "wall"):
+            raise BadInputError(f"clock_mode must be 'sim' or 'wall', got {self.clock_mode!r}")
+        variant = declare(self, "variant", "nominal", "plant model variant", read_only=True)
+        seed = declare(self, "seed", 0, "seed of the sensor noise", lo=0, hi=2**31 - 1, read_only=True)
+        period = declare(self, "period_s", paper.LOOP_PERIOD_S, "loop period, s", lo=1e-4, hi=1.0, read_only=True)
+        laser_noise = declare(self, "laser_noise_mm", LaserConfig().noise_mm, "laser noise (std), mm",
+                              lo=0.0, hi=1.0, read_only=True)
+        strain_noise = declare(self, "strain_noise_us", StrainConfig().noise_us, "555 noise at 0 kV (std), us",
+                               lo=0.0, hi=100.0, read_only=True)
+        strain_noise_kv = declare(self, "strain_noise_us_per_kv", StrainConfig().noise_us_per_kv,
+                                  "extra 555 noise per applied kV, us/kV", lo=0.0, hi=100.0, read_only=True)
+        self.lockstep_timeout_s = declare(self, "lockstep_timeout_s", 0.25,
+                                          "wall time to wait for the amplifier before stepping anyway, s",
+                                          lo=0.001, hi=60.0)
+        self.stop_at_s = declare(self, "stop_at_s", -1.0, "simulated time to stop at, s (negative: never)",
+                                 lo=-1.0, hi=1e9)
+        autostart = declare(self, "autostart", True, "start stepping by itself (sim mode)")
+        self.publish_batch = declare(self, "publish_batch", True, "publish the 10 kHz samples")
+        self.sim = PlantSimulator(actuator or make_actuator(variant), period_s=period, seed=seed,
+                                  laser=LaserConfig(noise_mm=laser_noise),
+                                  strain=StrainConfig(noise_us=strain_noise, noise_us_per_kv=strain_noise_kv))
+        self.period_ns = int(round(period * 1e9))
+        self.trigger_period_us = 1e6 / self.sim.strain.config.trigger_hz
+        self.command: float | np.ndarray = 0.0
+        self.missed = 0
+        self.running = False
+        self.done = False
+        self.sequence = 0
+        self._last_progress = time.monotonic()
+
+        self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
+            if self.clock_mode == "sim" else None
+        self.timing_pub = self.create_publisher(SensorTiming, "/sensor/timing", topic_qos("/sensor/timing"))
+        self.laser_pub = self.create_publisher(Stroke, "/laser/stroke", topic_qos("/laser/stroke"))
+        self.batch_pub = self.create_publisher(SampleBatch, "/plant/batch", topic_qos("/plant/batch"))
+        self.create_subscription(VoltageCommand, "/amp/applied", self.on_applied, topic_qos("/amp/applied"))
+        self.create_subscription(SampleBatch, "/amp/applied_batch", self.on_applied_batch,
+                                 topic_qos("/amp/applied_batch"))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if self.clock_mode == "wall":
+            self.create_timer(period, self.on_wall_tick, clock=steady)
+        else:
+            self.create_timer(min(self.lockstep_timeout_s / 2, 0.05), self.on_lockstep_watch, clock=steady)
+            if autostart:
+                self._autostart = self.create_timer(1.0, self._start_once, clock=steady)
+
+    # -- time ---------------------------------------------------------------------------
+    def tick_stamp_ns(self) -> int:
+        """Stamp of the current tick, ns (exact integer arithmetic: no drift)."""
+        return self.sim.tick * self.period_ns
+
+    def now_s(self) -> float:
+        """Simulated time of the current tick, s."""
+        return self.tick_stamp_ns() * 1e-9
+
+    def _stamp(self, msg, ns: int) -> None:
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+
+    # -- lockstep -----------------------------------------------------------------------
+    def _start_once(self) -> None:
+        self._autostart.cancel()
+        self.start()
+
+    def start(self) -> None:
+        """Begin stepping (sim mode): publish time and the readings of tick 0."""
+        if self.running:
+            return
+        self.running = True
+        self._last_progress = time.monotonic()
+        self._publish_tick()
+
+    def on_applied(self, msg: VoltageCommand) -> None:
+        """The amplifier's output for one tick (held for one period)."""
+        self._on_command(msg.header.stamp, msg.applied_kv)
+
+    def on_applied_batch(self, msg: SampleBatch) -> None:
+        """The amplifier's output as a 10 kHz waveform for one period."""
+        cmd = np.asarray(msg.voltage_kv, dtype=float)
+        if cmd.size != self.sim.samples_per_period:
+            self.get_logger().error(f"applied batch has {cmd.size} samples, need {self.sim.samples_per_period}")
+            return
+        self._on_command(msg.header.stamp, cmd)
+
+    def _on_command(self, stamp, command) -> None:
+        cmd = np.where(np.isfinite(command), command, 0.0) if np.ndim(command) else \
+            (command if math.isfinite(command) else 0.0)
+        if self.clock_mode == "wall":
+            self.command = cmd
+            return
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if not self.running or self.done or ns != self.tick_stamp_ns():
+            return  # not for this tick (late, duplicate or early): ignore
+        self.command = cmd
+        self.missed = 0
+        self._advance()
+
+    def on_lockstep_watch(self) -> None:
+        """Wall-time guard of lockstep: step anyway if the amplifier has gone quiet."""
+        if not self.running or self.done:
+            return
+        if time.monotonic() - self._last_progress < self.lockstep_timeout_s:
+            return
+        self.missed += 1
+        if self.missed > 3:
+            self.command = 0.0  # the MCU's own watchdog: no command for three periods
+        self._advance()
+
+    def _advance(self) -> None:
+        block = self.sim.step(self.command)
+        self._last_progress = time.monotonic()
+        if self.publish_batch:
+            self._publish_batch(block)
+        if self.stop_at_s >= 0 and self.now_s() >= self.stop_at_s - 1e-12:
+            self.done = True
+        self._publish_tick()
+
+    # -- wall mode ----------------------------------------------------------------------
+    def on_wall_tick(self) -> None:
+        """Real-time mode: step with the latest command, stamp with the node's clock."""
+        block = self.sim.step(self.command)
+        if self.publish_batch:
+            self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
+        self._publish_tick(self.get_clock().now().nanoseconds)
+
+    # -- publishing ---------------------------------------------------------------------
+    def _publish_batch(self, block: PlantBlock, t0_ns: int | None = None) -> None:
+        msg = SampleBatch(sample_period_s=block.dt_s)
+        start_ns = (self.tick_stamp_ns() - self.period_ns) if t0_ns is None else t0_ns
+        self._stamp(msg, start_ns + int(round(block.dt_s * 1e9)))  # first sample: end of the first 0.1 ms
+        msg.voltage_kv = block.applied_kv
+        msg.stroke_mm = block.laser_mm
+        msg.true_stroke_mm = block.true_stroke_mm
+        msg.elapsed_us = block.elapsed_us
+        self.batch_pub.publish(msg)
+
+    def _publish_tick(self, ns: int | None = None) -> None:
+        ns = self.tick_stamp_ns() if ns is None else ns
+        rd = self.sim.latest()
+        if self.clock_pub is not None:
+            c = ClockMsg()
+            c.clock.sec, c.clock.nanosec = divmod(ns, 1_000_000_000)
+            self.clock_pub.publish(c)
+        self.sequence += 1
+        timing = SensorTiming(elapsed_us=rd.elapsed_us, period_us=self.trigger_period_us, sequence=self.sequence)
+        self._stamp(timing, ns)
+        laser = Stroke(stroke_mm=rd.laser_mm, source=Stroke.SOURCE_LASER)
+        self._stamp(laser, ns)
+        self.timing_pub.publish(timing)
+        self.laser_pub.publish(laser)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run sim_plant plant``."""
+    return run_node(PlantNode, args)
