@@ -1,0 +1,118 @@
+"""The amplifier node across the node boundary: property-based tests of the HV envelope."""
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+import rclpy
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from rcl_interfaces.srv import SetParameters
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+
+from hasel_control.amplifier_node import HvAmplifierNode
+from hasel_driver.rosutil import topic_qos
+from hasel_msgs.msg import SampleBatch, VoltageCommand
+
+
+class Harness:
+    """An amplifier node and a test node in their own context, spun on demand."""
+
+    def __init__(self) -> None:
+        from rclpy.experimental import EventsExecutor
+
+        self.ctx = Context()
+        rclpy.init(context=self.ctx)
+        self.amp = HvAmplifierNode(context=self.ctx)
+        self.node = rclpy.create_node("amp_probe", context=self.ctx)
+        self.pub = self.node.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
+        self.bpub = self.node.create_publisher(SampleBatch, "/amp/command_batch", topic_qos("/amp/command_batch"))
+        self.ppub = self.node.create_publisher(VoltageCommand, "/amp/precondition", topic_qos("/amp/precondition"))
+        self.got: list[VoltageCommand] = []
+        self.batches: list[SampleBatch] = []
+        self.node.create_subscription(VoltageCommand, "/amp/applied", self.got.append, topic_qos("/amp/applied"))
+        self.node.create_subscription(SampleBatch, "/amp/applied_batch", self.batches.append,
+                                      topic_qos("/amp/applied_batch"))
+        self.ex = EventsExecutor(context=self.ctx)
+        self.ex.add_node(self.amp)
+        self.ex.add_node(self.node)
+        for _ in range(500):
+            if self.pub.get_subscription_count() and self.amp.applied_pub.get_subscription_count():
+                break
+            self.ex.spin_once(timeout_sec=0.01)
+
+    def send(self, kv: float) -> VoltageCommand:
+        n = len(self.got)
+        self.pub.publish(VoltageCommand(requested_kv=kv))
+        for _ in range(200):
+            self.ex.spin_once(timeout_sec=0.01)
+            if len(self.got) > n:
+                return self.got[-1]
+        raise AssertionError("no applied command came back")
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.amp.destroy_node()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+@pytest.fixture(scope="module")
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+@settings(max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kv=st.floats(allow_nan=True, allow_infinity=True, width=64))
+def test_no_request_leaves_the_envelope(harness, kv):
+    out = harness.send(kv)
+    assert 0.0 <= out.applied_kv <= 9.0
+    if not math.isfinite(kv):
+        assert out.applied_kv == 0.0 and out.reason == VoltageCommand.REASON_NONFINITE
+    elif 0.0 <= kv <= 9.0:
+        assert out.applied_kv == kv and not out.clamped
+    else:
+        assert out.clamped
+
+
+def test_batches_are_limited_sample_by_sample(harness):
+    rng = np.random.default_rng(0)
+    req = np.concatenate([rng.normal(5, 10, 46), [np.nan, np.inf, -np.inf, 1e300]])
+    n = len(harness.batches)
+    harness.bpub.publish(SampleBatch(sample_period_s=1e-4, voltage_kv=req.tolist()))
+    for _ in range(200):
+        harness.ex.spin_once(timeout_sec=0.01)
+        if len(harness.batches) > n:
+            break
+    out = np.asarray(harness.batches[-1].voltage_kv)
+    assert out.shape == req.shape and out.min() >= 0.0 and out.max() <= 9.0
+    np.testing.assert_array_equal(out[-4:], [0.0, 0.0, 0.0, 9.0])
+
+
+def test_precondition_is_the_only_way_below_zero(harness):
+    n = len(harness.got)
+    harness.ppub.publish(VoltageCommand(requested_kv=-1.0))
+    for _ in range(200):
+        harness.ex.spin_once(timeout_sec=0.01)
+        if len(harness.got) > n:
+            break
+    out = harness.got[-1]
+    assert out.applied_kv == -1.0 and out.reason == VoltageCommand.REASON_PRECONDITION
+    assert harness.send(-1.0).applied_kv == 0.0  # the ordinary path clamps at v_min = 0
+
+
+def test_unsafe_parameters_are_rejected_with_the_reason(harness):
+    res = harness.amp.set_parameters([Parameter("v_max_kv", value=12.0)])
+    assert not res[0].successful and "9" in res[0].reason
+    res = harness.amp.set_parameters([Parameter("v_min_kv", value=-1.0)])
+    assert not res[0].successful
+    assert harness.amp.limits.v_max_kv == 9.0 and harness.amp.limits.v_min_kv == 0.0
+    ok = harness.amp.set_parameters([Parameter("v_max_kv", value=6.0)])
+    assert ok[0].successful
+    assert harness.send(8.0).applied_kv == 6.0
+    harness.amp.set_parameters([Parameter("v_max_kv", value=9.0)])
