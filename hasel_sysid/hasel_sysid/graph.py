@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rclpy
+import rclpy.logging
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -103,7 +104,8 @@ class Collector(Node):
 class NodeGraph:
     """Builds, runs and tears down one closed-loop graph in simulated time."""
 
-    def __init__(self, config: GraphConfig | None = None, extra_nodes: list[Callable[[Context], Node]] = ()):
+    def __init__(self, config: GraphConfig | None = None, extra_nodes: list[Callable[[Context], Node]] = (),
+                 quiet: bool = True):
         self.config = cfg = config or GraphConfig()
         self.context = Context()
         rclpy.init(context=self.context)
@@ -113,6 +115,10 @@ class NodeGraph:
             return sim + [Parameter(k, value=v) for k, v in d.items()]
 
         kw = {"context": self.context}
+        if quiet:
+            for name in ("sim_plant", "strain_driver", "lowpass_filter", "hv_amplifier", "pid_controller",
+                         "reference_generator", "hasel_collector"):
+                rclpy.logging.set_logger_level(name, rclpy.logging.LoggingSeverity.WARN)
         self.nodes: list[Node] = []
         try:
             self.plant = PlantNode(cfg.actuator, **kw, parameter_overrides=params(
