@@ -45,12 +45,17 @@ class Harness:
             self.ex.spin_once(timeout_sec=0.01)
 
     def send(self, kv: float) -> VoltageCommand:
-        n = len(self.got)
-        self.pub.publish(VoltageCommand(requested_kv=kv))
-        for _ in range(200):
+        """Publish one request and return the amplifier's answer to it (matched by stamp:
+        the watchdog may publish its own 0 kV messages in between, on wall time)."""
+        self.seq = getattr(self, "seq", 0) + 1
+        msg = VoltageCommand(requested_kv=kv)
+        msg.header.stamp.sec = self.seq
+        self.pub.publish(msg)
+        for _ in range(500):
             self.ex.spin_once(timeout_sec=0.01)
-            if len(self.got) > n:
-                return self.got[-1]
+            for m in reversed(self.got):
+                if m.header.stamp.sec == self.seq and m.reason != VoltageCommand.REASON_WATCHDOG:
+                    return m
         raise AssertionError("no applied command came back")
 
     def close(self) -> None:
@@ -95,13 +100,14 @@ def test_batches_are_limited_sample_by_sample(harness):
 
 
 def test_precondition_is_the_only_way_below_zero(harness):
-    n = len(harness.got)
-    harness.ppub.publish(VoltageCommand(requested_kv=-1.0))
-    for _ in range(200):
+    msg = VoltageCommand(requested_kv=-1.0)
+    msg.header.stamp.sec = 10**6
+    harness.ppub.publish(msg)
+    for _ in range(500):
         harness.ex.spin_once(timeout_sec=0.01)
-        if len(harness.got) > n:
+        if any(m.header.stamp.sec == 10**6 for m in harness.got):
             break
-    out = harness.got[-1]
+    out = next(m for m in harness.got if m.header.stamp.sec == 10**6)
     assert out.applied_kv == -1.0 and out.reason == VoltageCommand.REASON_PRECONDITION
     assert harness.send(-1.0).applied_kv == 0.0  # the ordinary path clamps at v_min = 0
 

@@ -20,7 +20,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from hasel.topics import QosSpec, topic
 
-__all__ = ["qos", "topic_qos", "to_stamp", "from_stamp", "declare", "diagnostic", "run_node",
+__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "declare", "diagnostic", "run_node",
            "validate_with"]
 
 
@@ -35,6 +35,21 @@ def qos(spec: QosSpec) -> QoSProfile:
 def topic_qos(name: str) -> QoSProfile:
     """rclpy profile of one of the graph's default topics (see :mod:`hasel.topics`)."""
     return qos(topic(name).qos)
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of a message type named ``pkg/msg/Type`` (or ``pkg/Type``)."""
+    import importlib
+
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"not a message type name: {type_name!r}")
+    try:
+        return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
+    except (ImportError, AttributeError) as err:
+        raise ValueError(f"message type {type_name} is not installed ({err})") from err
 
 
 def to_stamp(t_s: float) -> Time:

@@ -69,6 +69,22 @@ def _calibrate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="calibration.yaml", help="calibration YAML to write (default calibration.yaml)")
 
 
+def _record_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-o", "--output", required=True, metavar="FILE.mcap", help="MCAP file to write")
+    p.add_argument("--topics", default="", help="comma-separated topics (default: all, discovered as they appear)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing file")
+
+
+def _replay_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE", help="MCAP file to replay")
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor of the recorded timing (0: as fast as possible)")
+    p.add_argument("--topics", default="", help="comma-separated topics to replay (default: all)")
+    p.add_argument("--remap", action="append", metavar="FROM:=TO", help="publish a topic under another name")
+    p.add_argument("--clock", action="store_true", help="also publish /clock from the log times")
+    p.add_argument("--wait", type=float, default=1.0, help="seconds for discovery before the first message")
+
+
 def _env_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("argv", nargs=argparse.REMAINDER, help="command to run (after --)")
 
@@ -96,6 +112,10 @@ COMMANDS: list[Command] = [
             _steps_args, "hasel_sysid.steps:run", True),
     Command("calibrate", "strain-sensor calibration against the laser (1 mm steps, 2-7 mm)",
             _calibrate_args, "hasel_sysid.calibrate:run", True),
+    Command("record", "record topics of the running graph to an MCAP file (rosbag2 layout)",
+            _record_args, "hasel_sysid.replay:run_record", True),
+    Command("replay", "publish a recorded MCAP file back into the graph", _replay_args,
+            "hasel_sysid.replay:run_replay", True),
     Command("demo", "the end-to-end demo that `make demo` runs", _demo_args, "hasel_sysid.demo:run", True),
     Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
             "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False),

@@ -1,0 +1,174 @@
+"""``hasel replay FILE`` and ``hasel record``: MCAP logs back into the graph, and recording.
+
+Replay publishes each recorded message, raw (the recorded CDR bytes, no decoding), on
+its topic (or a remapped one), in log-time order, with the recorded timing scaled by
+``--rate`` (``--rate 0``: as fast as possible). ``--clock`` also publishes ``/clock``
+from the log times, so nodes under use_sim_time run on the log's time. QoS: what the
+log's ``offered_qos_profiles`` says, made reliable with a deep queue so that fast replay
+drops nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from hasel.errors import BadInputError, DataFileError
+from hasel_driver.rosutil import message_class
+
+__all__ = ["RawMessage", "read_raw", "Replayer", "parse_remaps", "run_replay", "run_record"]
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One recorded message: topic, type name, CDR bytes, log and publish time (ns)."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+
+
+def read_raw(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[RawMessage]:
+    """Recorded messages of ``path`` in log-time order (streaming; DataFileError if damaged)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    p = Path(path)
+    if not p.is_file():
+        raise BadInputError(f"no such file: {p}")
+    try:
+        with p.open("rb") as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
+                                                                 log_time_order=True):
+                name = schema.name if schema is not None else ""
+                if name.count("/") == 1:  # older rosbag2 naming pkg/Type
+                    name = name.replace("/", "/msg/")
+                yield RawMessage(channel.topic, name, message.data, message.log_time, message.publish_time)
+    except (McapError, ValueError, EOFError, OSError) as err:
+        raise DataFileError(f"{p}: cannot be replayed ({type(err).__name__}: {err}); "
+                            f"try `hasel info {p}` and `hasel salvage`") from err
+
+
+def parse_remaps(remaps: Sequence[str]) -> dict[str, str]:
+    """``["/a:=/b", ...]`` -> ``{"/a": "/b"}``."""
+    out = {}
+    for r in remaps:
+        if ":=" not in r:
+            raise BadInputError(f"a remap is FROM:=TO, got {r!r}")
+        a, b = r.split(":=", 1)
+        if not a.startswith("/") or not b.startswith("/"):
+            raise BadInputError(f"remapped topics must be absolute (/name), got {r!r}")
+        out[a] = b
+    return out
+
+
+class Replayer:
+    """Publishes recorded messages through ``node``; one call of :meth:`publish` per message."""
+
+    def __init__(self, node: Node, remap: dict[str, str] | None = None, clock: bool = False) -> None:
+        self.node = node
+        self.remap = remap or {}
+        self.pubs: dict[str, object] = {}
+        self.clock_pub = node.create_publisher(ClockMsg, "/clock", 10) if clock else None
+        self.count = 0
+
+    def publisher(self, topic: str, type_name: str):
+        """The (cached) raw publisher of a recorded topic."""
+        pub = self.pubs.get(topic)
+        if pub is None:
+            try:
+                cls = message_class(type_name)
+            except ValueError as err:
+                raise BadInputError(f"cannot replay {topic}: {err}") from err
+            profile = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.VOLATILE)
+            pub = self.node.create_publisher(cls, self.remap.get(topic, topic), profile)
+            self.pubs[topic] = pub
+        return pub
+
+    def publish(self, m: RawMessage) -> None:
+        """Publish one recorded message (and /clock at its log time when asked)."""
+        if self.clock_pub is not None and m.topic != "/clock":
+            c = ClockMsg()
+            c.clock.sec, c.clock.nanosec = divmod(m.log_time_ns, 1_000_000_000)
+            self.clock_pub.publish(c)
+        self.publisher(m.topic, m.type_name).publish(m.data)
+        self.count += 1
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    """CLI: ``hasel replay FILE [--rate R] [--topics ...] [--remap FROM:=TO] [--clock]``."""
+    if args.rate < 0:
+        raise BadInputError(f"--rate must be >= 0 (0: as fast as possible), got {args.rate}")
+    remap = parse_remaps(args.remap or [])
+    topics = [t for t in (args.topics or "").split(",") if t] or None
+    first = next(read_raw(args.file, topics), None)  # validates the file before ROS starts
+    if first is None:
+        raise BadInputError(f"{args.file}: no messages{' on ' + ','.join(topics) if topics else ''}")
+    rclpy.init()
+    node = rclpy.create_node("hasel_replay")
+    rep = Replayer(node, remap, clock=args.clock)
+    try:
+        # publishers first, then a moment for discovery so the first messages are not lost
+        for m in read_raw(args.file, topics):
+            rep.publisher(m.topic, m.type_name)
+        time.sleep(args.wait)
+        t0_log, t0_wall = None, time.monotonic()
+        for m in read_raw(args.file, topics):
+            if t0_log is None:
+                t0_log = m.log_time_ns
+            if args.rate > 0:
+                due = t0_wall + (m.log_time_ns - t0_log) * 1e-9 / args.rate
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            rep.publish(m)
+        time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(f"replayed {rep.count} messages on {len(rep.pubs)} topics from {args.file}")
+    return 0
+
+
+def run_record(args: argparse.Namespace) -> int:
+    """CLI: ``hasel record -o FILE.mcap [--topics a,b] [--duration S]``: until Ctrl-C/SIGTERM or the duration."""
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    from hasel_sysid.recorder_node import RecorderNode
+
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        raise BadInputError(f"{out} exists; use --overwrite to replace it")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    topics = [t for t in (args.topics or "").split(",") if t] or None
+    rclpy.init()
+    node = RecorderNode(str(out), topics)
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    end = None if args.duration is None else time.monotonic() + args.duration
+    try:
+        while end is None or time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()  # closes the file: summary and footer
+        rclpy.try_shutdown()
+    total = sum(node.counts.values())
+    print(f"recorded {total} messages on {sum(1 for c in node.counts.values() if c)} topics to {out}")
+    return 0
