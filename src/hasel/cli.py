@@ -112,6 +112,8 @@ COMMANDS: list[Command] = [
             _steps_args, "hasel_sysid.steps:run", True),
     Command("calibrate", "strain-sensor calibration against the laser (1 mm steps, 2-7 mm)",
             _calibrate_args, "hasel_sysid.calibrate:run", True),
+    Command("chirp", "the paper's identification experiment (chirps on DC offsets), recorded to MCAP",
+            "hasel_sysid.chirp:add_arguments", "hasel_sysid.chirp:run", True),
     Command("record", "record topics of the running graph to an MCAP file (rosbag2 layout)",
             _record_args, "hasel_sysid.replay:run_record", True),
     Command("replay", "publish a recorded MCAP file back into the graph", _replay_args,
@@ -150,6 +152,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    first = next((a for a in argv if not a.startswith("-")), None)
+    if any(c.name == first and c.needs_ros for c in COMMANDS):
+        # its options may live in a ROS package: get the workspace on the path first
+        from hasel.rosenv import ensure_ros_environment
+
+        ensure_ros_environment()
     parser = build_parser()
     args = parser.parse_args(argv)
     cmd: Command | None = getattr(args, "_command", None)
