@@ -24,7 +24,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line and exit code 2 (no usage dump)."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        sys.stderr.write(f"hasel {self.prog.split()[-1]}: error: {message}\n")
+        name = self.prog.split()[-1]
+        sys.stderr.write(f"hasel{'' if name == 'hasel' else ' ' + name}: error: {message}\n")
         raise SystemExit(2)
 
 
