@@ -12,10 +12,14 @@ References arrive on ``/reference`` stamped with the time they take effect, so a
 sequence can be published ahead of time and still be applied at exactly the right
 tick (deterministic in simulated time).
 
-Faults: a non-finite sample or no sample for ``stale_periods`` periods holds the
-integrator, sends no command (the amplifier's watchdog then drives 0 kV) and reports a
-diagnostic ERROR; when samples return, control resumes from the held integrator
-without a derivative kick.
+Faults (see FAULTS.md): a sample that fails the plausibility gate (non-finite, out of
+range, or a single-sample spike; :class:`hasel.faults.PlausibilityGate`) is counted
+and skipped: the last command is held for that tick. No valid sample for
+``stale_periods`` periods, or a stuck sensor (feedback frozen while the command
+moves; :class:`hasel.faults.StuckDetector`), holds the integrator, sends no command
+(the amplifier's watchdog then drives 0 kV within three periods) and reports a
+diagnostic ERROR; when valid, moving samples return, control resumes from the held
+integrator without a derivative kick.
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 
 from hasel import paper
+from hasel.faults import PlausibilityGate, StuckDetector
 from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
 from hasel_driver.rosutil import declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
 from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
@@ -58,6 +63,11 @@ class PidControllerNode(Node):
         aw = declare(self, "anti_windup", "conditional_integration", f"one of {', '.join(ANTI_WINDUP)}")
         self.stale_periods = declare(self, "stale_periods", 3.0, "feedback age that counts as stale, periods",
                                      lo=1.0, hi=100.0)
+        max_step = declare(self, "gate_max_step_mm", 1.5, "largest plausible change per period, mm", lo=0.01, hi=100.0)
+        self.gate = PlausibilityGate(max_step_mm=max_step)
+        self.stuck = StuckDetector()
+        self.stuck_value: float | None = None
+        self.last_output_kv = 0.0
         self.pid = DualModePid(self._config(g, period, v_min, v_max, aw))
         self.add_on_set_parameters_callback(validate_with(self._on_params))
 
@@ -68,8 +78,9 @@ class PidControllerNode(Node):
         self.cmd_pub = self.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
         self.state_pub = self.create_publisher(ControllerState, "/controller/state", topic_qos("/controller/state"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
-        self.create_subscription(Stroke, FEEDBACK_TOPICS[self.feedback], self.on_feedback,
-                                 topic_qos(FEEDBACK_TOPICS[self.feedback]))
+        fb_topic = declare(self, "feedback_topic", "", "override of the feedback topic ('' = from feedback)",
+                           read_only=True) or FEEDBACK_TOPICS[self.feedback]
+        self.create_subscription(Stroke, fb_topic, self.on_feedback, topic_qos(FEEDBACK_TOPICS[self.feedback]))
         self.create_subscription(Reference, "/reference", self.on_reference, topic_qos("/reference"))
         self.create_timer(period, self.on_watch)  # staleness check, on the ROS (maybe simulated) clock
 
@@ -108,13 +119,23 @@ class PidControllerNode(Node):
         t = from_stamp(msg.header.stamp)
         z = msg.stroke_mm
         r = self.reference_at(t)
-        if not math.isfinite(z):
-            self.rejected += 1
-            self._set_stale(True, t, "non-finite feedback")
+        if self.stuck_value is not None:
+            if z == self.stuck_value:
+                return  # still frozen: stay in the fault, send nothing
+            self.stuck_value = None
+            self.stuck.reset()
+        if not self.gate.accept(z):
+            self.rejected = self.gate.rejected
+            if not self.stale:  # hold the last command for this tick; the integrator does not move
+                self._publish_command(msg.header.stamp, self.last_output_kv)
             return
         self.last_feedback_s = t
         if self.stale:
             self._set_stale(False, t, "feedback back")
+        if self.stuck.update(z, self.last_output_kv):
+            self.stuck_value = z
+            self._set_stale(True, t, "sensor stuck: no change while the command moved")
+            return
         if not math.isfinite(r):
             # nothing to track yet: command 0 kV (alive, so the amplifier's watchdog stays calm)
             self._publish_command(msg.header.stamp, 0.0)
@@ -129,6 +150,7 @@ class PidControllerNode(Node):
         self.state_pub.publish(st)
 
     def _publish_command(self, stamp, kv: float) -> None:
+        self.last_output_kv = kv
         cmd = VoltageCommand(requested_kv=kv, applied_kv=math.nan, clamped=False)
         cmd.header.stamp = stamp
         self.cmd_pub.publish(cmd)
@@ -139,7 +161,7 @@ class PidControllerNode(Node):
         if self.last_feedback_s is None:
             return
         if now - self.last_feedback_s > self.stale_periods * self.pid.config.period_s + 1e-9:
-            self._set_stale(True, now, "no feedback")
+            self._set_stale(True, now, "no valid feedback")
 
     def _set_stale(self, stale: bool, t_s: float, why: str) -> None:
         if stale == self.stale:

@@ -12,6 +12,7 @@ Per 200 Hz tick k (t_k = k Ts), exactly as the nodes do it:
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -21,8 +22,9 @@ from hasel import paper
 from hasel.amplifier import HvLimits
 from hasel.calibration import Calibration
 from hasel.errors import BadInputError
+from hasel.faults import PlausibilityGate
 from hasel.filters import LowPass
-from hasel.pid import DualModeConfig, DualModePid
+from hasel.pid import DualModeConfig, DualModePid, PidOutput
 from hasel.sensors import StrainConfig
 from hasel.simulator import PlantSimulator
 
@@ -95,6 +97,8 @@ def run_closed_loop(sim: PlantSimulator, reference: Callable[[float], float], du
     cal = cfg.calibration or default_calibration(sim.strain.config)
     lp = LowPass(cfg.filter_cutoff_hz, 1.0 / sim.period_s)
     pid = DualModePid(cfg.pid)
+    gate = PlausibilityGate()
+    command = 0.0
     n = int(round(duration_s / sim.period_s))
     rec = {k: np.empty(n) for k in ("t", "r", "laser", "strain", "filt", "fb", "req", "cmd", "mode", "i")}
     blocks = []
@@ -104,8 +108,12 @@ def run_closed_loop(sim: PlantSimulator, reference: Callable[[float], float], du
         z_filt = lp(z_strain)
         fb = rd.laser_mm if cfg.feedback == "laser" else z_filt
         r = reference(rd.t_s)
-        out = pid.update(r, fb)
-        applied = cfg.limits.apply(out.output_kv)
+        if gate.accept(fb):
+            out = pid.update(r, fb)
+            command = out.output_kv
+        else:  # as the controller node: a rejected sample holds the last command
+            out = PidOutput(command, command, math.nan, pid.mode, 0.0, pid.i_kv, 0.0, False)
+        applied = cfg.limits.apply(command)
         blocks.append(sim.step(applied.applied_kv))
         for key, val in (("t", rd.t_s), ("r", r), ("laser", rd.laser_mm), ("strain", z_strain),
                          ("filt", z_filt), ("fb", fb), ("req", out.output_kv),
