@@ -1,0 +1,197 @@
+"""Does the dynamic response depend on the operating point? A test of the paper's claim.
+
+The paper found the dynamic response ``h_d`` of the actuator independent of the DC
+offset over 2-7 kV (Fig. 3), by eye. Here the claim is tested against the data's
+own uncertainty: the H1 estimates of the operating points (on one frequency grid)
+are compared with their inverse-variance weighted mean. Under the hypothesis of one
+common response and Gaussian errors of standard deviation ``sigma_k / sqrt(2)`` in
+the real and imaginary parts,
+
+``chi2 = sum_k sum_f |H_k(f) - H_mean(f)|^2 / (sigma_k(f)^2 / 2)``
+
+follows a chi-square law with ``2 (K - 1) N_f`` degrees of freedom. Only points
+where every operating point is coherent (``coherence >= coherence_min``) enter, and
+only every ``thin``-th of them, because neighbouring Hann bins are correlated.
+
+Statistical significance is not the whole story: with long, clean records even a
+tiny, harmless difference is significant. So the verdict also weighs the size of
+the differences, the spread between the operating points' curves (largest minus
+smallest at each frequency, 95th percentile over the tested band, in dB and
+degrees), against tolerances (default 1 dB and 5 degrees, the accuracy a model is
+asked for):
+
+- ``"independent"``: the differences are within the noise (``p >= alpha``);
+- ``"weakly_dependent"``: significant, but within the tolerances;
+- ``"dependent"``: beyond the tolerances;
+- ``"untestable"``: fewer than two operating points or no coherent point.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from hasel.errors import BadInputError
+from hasel.ident.freqresp import FreqResp
+
+__all__ = ["DependenceTest", "offset_dependence", "VERDICTS"]
+
+#: Possible values of :attr:`DependenceTest.verdict`.
+VERDICTS = ("independent", "weakly_dependent", "dependent", "untestable")
+
+
+@dataclass(frozen=True)
+class DependenceTest:
+    """Result of :func:`offset_dependence`.
+
+    Attributes
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`.
+    summary : str
+        One sentence with the numbers behind the verdict.
+    chi2, dof, p_value, reduced_chi2 : float, int, float, float
+        The statistic, its degrees of freedom, the probability of a value at least as
+        large under independence, and ``chi2 / dof``.
+    max_dev_db, max_dev_deg : float
+        Largest deviation of any operating point from the pooled mean over the tested
+        points, dB and degrees.
+    spread_db, spread_deg : float
+        95th percentile over the tested frequencies of the spread between the
+        operating points (largest minus smallest magnitude in dB, phase in degrees).
+    band_hz : (float, float)
+        Lowest and highest tested frequency, Hz.
+    n_points : int
+        Frequencies tested.
+    offsets : list of float
+        The operating points compared (input unit).
+    per_offset : list of dict
+        For each operating point: ``offset``, ``reduced_chi2``, ``mean_dev_db``,
+        ``mean_dev_deg`` (its average deviation from the pooled mean).
+    alpha, tol_db, tol_deg, coherence_min : float
+        The settings used.
+    """
+
+    verdict: str
+    summary: str
+    chi2: float
+    dof: int
+    p_value: float
+    reduced_chi2: float
+    max_dev_db: float
+    max_dev_deg: float
+    spread_db: float
+    spread_deg: float
+    band_hz: tuple[float, float]
+    n_points: int
+    offsets: list[float]
+    per_offset: list[dict] = field(default_factory=list)
+    alpha: float = 0.01
+    tol_db: float = 1.0
+    tol_deg: float = 5.0
+    coherence_min: float = 0.9
+
+    def to_json(self) -> dict:
+        """JSON-ready dict (non-finite numbers become None)."""
+        def clean(v):
+            if isinstance(v, float):
+                return v if np.isfinite(v) else None
+            if isinstance(v, (list, tuple)):
+                return [clean(x) for x in v]
+            if isinstance(v, dict):
+                return {k: clean(x) for k, x in v.items()}
+            return v
+        return clean({k: getattr(self, k) for k in self.__dataclass_fields__})
+
+
+def _untestable(reason: str, offsets: list[float], alpha: float, tol_db: float, tol_deg: float,
+                coherence_min: float) -> DependenceTest:
+    nan = float("nan")
+    return DependenceTest("untestable", reason, nan, 0, nan, nan, nan, nan, nan, nan, (nan, nan), 0, offsets,
+                          [], alpha, tol_db, tol_deg, coherence_min)
+
+
+def offset_dependence(responses: Sequence[FreqResp], *, coherence_min: float = 0.9, alpha: float = 0.01,
+                      tol_db: float = 1.0, tol_deg: float = 5.0, thin: int = 2,
+                      band_hz: Sequence[float] | None = None, unit: str = "") -> DependenceTest:
+    """Test whether frequency responses at several operating points share one response.
+
+    Parameters
+    ----------
+    responses : sequence of FreqResp
+        H1 estimates with ``sigma`` and ``coherence``, all on the same frequencies
+        (:func:`~hasel.ident.freqresp.welch_h1` with one shared plan), each with its
+        ``offset``.
+    coherence_min : float
+        Points where any response has a lower coherence are left out.
+    alpha : float
+        Significance level.
+    tol_db, tol_deg : float
+        Spreads (95th percentile) below which a significant dependence is called weak.
+    thin : int
+        Use every ``thin``-th coherent frequency.
+    band_hz : (float, float), optional
+        Restrict the test to this band, Hz.
+    unit : str
+        Unit of the offsets, for the summary.
+
+    Returns
+    -------
+    DependenceTest
+    """
+    offsets = [float(r.offset) for r in responses]
+    if len(responses) < 2:
+        return _untestable("untestable: fewer than two operating points", offsets, alpha, tol_db, tol_deg,
+                           coherence_min)
+    f = responses[0].f_hz
+    for r in responses[1:]:
+        if r.f_hz.shape != f.shape or not np.allclose(r.f_hz, f, rtol=1e-9, atol=0.0):
+            raise BadInputError("the responses must share their frequencies (use one welch_plan)")
+    if thin < 1:
+        raise BadInputError(f"thin must be >= 1, got {thin}")
+    Hk = np.array([r.H for r in responses])
+    Sk = np.array([r.sigma for r in responses])
+    Ck = np.array([r.coherence for r in responses])
+    ok = np.all(np.isfinite(Sk) & (Sk > 0) & np.isfinite(Hk), axis=0)
+    ok &= np.all(np.nan_to_num(Ck, nan=1.0) >= coherence_min, axis=0)
+    if band_hz is not None:
+        ok &= (f >= band_hz[0]) & (f <= band_hz[1])
+    idx = np.flatnonzero(ok)[::thin]
+    if idx.size == 0:
+        return _untestable(f"untestable: no frequency where every operating point has coherence >= {coherence_min}",
+                           offsets, alpha, tol_db, tol_deg, coherence_min)
+    H, S = Hk[:, idx], Sk[:, idx]
+    w = 1.0 / S**2
+    Hm = (w * H).sum(axis=0) / w.sum(axis=0)
+    z2 = np.abs(H - Hm) ** 2 / (S**2 / 2.0)
+    chi2 = float(z2.sum())
+    K, N = H.shape
+    dof = 2 * (K - 1) * N
+    p = float(stats.chi2.sf(chi2, dof))
+    ratio = H / Hm
+    dev_db = 20.0 * np.log10(np.abs(ratio))
+    dev_deg = np.degrees(np.angle(ratio))
+    max_db, max_deg = float(np.max(np.abs(dev_db))), float(np.max(np.abs(dev_deg)))
+    spread_db = float(np.percentile(np.ptp(dev_db, axis=0), 95))
+    spread_deg = float(np.percentile(np.ptp(dev_deg, axis=0), 95))
+    per = [{"offset": offsets[k], "reduced_chi2": float(z2[k].sum() / (2 * N * (K - 1) / K)),
+            "mean_dev_db": float(np.mean(dev_db[k])), "mean_dev_deg": float(np.mean(dev_deg[k]))}
+           for k in range(K)]
+    f_lo, f_hi = float(f[idx[0]]), float(f[idx[-1]])
+    span = f"{min(offsets):.3g}-{max(offsets):.3g}{(' ' + unit) if unit else ''}"
+    nums = (f"chi2/dof = {chi2 / dof:.3g}, p = {p:.3g}; the curves differ by {spread_db:.2g} dB and "
+            f"{spread_deg:.2g} deg (95th percentile over {f_lo:.3g}-{f_hi:.3g} Hz)")
+    if p >= alpha:
+        verdict = "independent"
+        summary = (f"independent: the {K} responses over {span} agree within their uncertainty ({nums})")
+    elif spread_db <= tol_db and spread_deg <= tol_deg:
+        verdict = "weakly_dependent"
+        summary = (f"weakly dependent: the {K} responses over {span} differ significantly but by less than "
+                   f"{tol_db:g} dB / {tol_deg:g} deg ({nums})")
+    else:
+        verdict = "dependent"
+        summary = (f"dependent: the dynamics change with the operating point over {span} ({nums})")
+    return DependenceTest(verdict, summary, chi2, dof, p, chi2 / dof, max_db, max_deg, spread_db, spread_deg,
+                          (f_lo, f_hi), int(N), offsets, per, alpha, tol_db, tol_deg, coherence_min)

@@ -1,0 +1,613 @@
+"""Offline identification of a SISO log: operating points, responses, static map, fit, validation.
+
+:func:`identify` takes sample times, input and output of any single-input
+single-output system (any rate, any units) and returns an :class:`IdentResult`:
+
+1. operating points: from explicit markers, or found from the input's DC level
+   (:mod:`hasel.ident.segments`); the start of each is skipped (step transient) and
+   its last ``holdout_fraction`` is held out for validation;
+2. per operating point, on the rest: the paper's FFT ratio (whole periods of a
+   periodic input) and a Welch H1 with coherence and uncertainty on a grid shared by
+   all operating points (:mod:`hasel.ident.freqresp`), after block-averaging the
+   samples down to about 20 times the band's top frequency;
+3. the static map ``h_s`` (mean output against mean input, :mod:`hasel.ident.staticmap`);
+4. a test of whether the dynamics depend on the operating point
+   (:mod:`hasel.ident.dependence`);
+5. a stable continuous transfer function fitted to the pooled H1, its order chosen on
+   held-out frequencies (:mod:`hasel.ident.tffit`);
+6. validation: ``y_hat = h_s(v_s) + G(s) (u - v_s)`` simulated over each operating
+   point and scored (MATLAB ``compare`` fit) on its held-out tail only.
+
+The model follows the paper's structure (12): ``z = h_s(v_s) + h_d(v_d)``, with
+``h_d`` the fitted ``G(s)``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from hasel.errors import BadInputError
+from hasel.ident.dependence import DependenceTest, offset_dependence
+from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_ratio, log_bin, pool, welch_h1,
+                                  welch_plan)
+from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
+from hasel.ident.staticmap import StaticMap, fit_static_map
+from hasel.ident.tffit import TFFit, fit_tf, fit_tf_order
+from hasel.ident.validation import compare_fit, simulate
+
+__all__ = ["IdentOptions", "OperatingPoint", "Validation", "IdentResult", "identify", "unit_from_name",
+           "check_signals"]
+
+#: Unit suffixes of signal names (``voltage_kv`` -> kV).
+_UNIT_SUFFIXES = {"kv": "kV", "v": "V", "mv": "mV", "mm": "mm", "um": "um", "m": "m", "us": "us",
+                  "ms": "ms", "s": "s", "n": "N", "a": "A", "ma": "mA", "deg": "deg", "rad": "rad",
+                  "pct": "%", "hz": "Hz"}
+
+
+def unit_from_name(name: str) -> str:
+    """The unit a signal name ends with (``"voltage_kv"`` -> ``"kV"``, ``"/plant/batch.stroke_mm"`` -> ``"mm"``), or ``""``."""
+    tail = name.rsplit(".", 1)[-1].rsplit("/", 1)[-1]
+    if "_" not in tail:
+        return ""
+    return _UNIT_SUFFIXES.get(tail.rsplit("_", 1)[-1].lower(), "")
+
+
+@dataclass(frozen=True)
+class IdentOptions:
+    """Settings of :func:`identify` (defaults suit the paper's chirp campaign and most logs).
+
+    Attributes
+    ----------
+    band_hz : (float, float) or None
+        Band analysed and fitted, Hz (default: where the input carries power).
+    settle_s : float or None
+        Skipped at the start of each operating point, s (default 5 % of it).
+    holdout_fraction : float
+        Last part of each operating point kept out of the estimation, for validation
+        (0 disables validation).
+    window_s, min_step : float or None
+        Operating-point detection (see :func:`~hasel.ident.segments.find_segments`).
+    analysis_rate_hz : float or None
+        Rate the samples are block-averaged down to (default: about 20 x the band's top).
+    bins_per_octave : int
+        Resolution of the H1 estimate.
+    min_averages : int
+        Welch segments at the coarsest resolution.
+    max_poles : int
+        Highest denominator degree tried by the order selection.
+    order : (int, int) or None
+        Fix the (numerator, denominator) degrees instead of selecting them.
+    delay : bool
+        Fit an input delay.
+    rel_floor : float
+        Smallest relative uncertainty in the fit's weights.
+    coherence_min, alpha, tol_db, tol_deg : float
+        Settings of the operating-point dependence test.
+    """
+
+    band_hz: tuple[float, float] | None = None
+    settle_s: float | None = None
+    holdout_fraction: float = 1.0 / 3.0
+    window_s: float | None = None
+    min_step: float | None = None
+    analysis_rate_hz: float | None = None
+    bins_per_octave: int = 16
+    min_averages: int = 5
+    max_poles: int = 8
+    order: tuple[int, int] | None = None
+    delay: bool = False
+    rel_floor: float = 0.003
+    coherence_min: float = 0.9
+    alpha: float = 0.01
+    tol_db: float = 1.0
+    tol_deg: float = 5.0
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """Results of one operating point.
+
+    Attributes
+    ----------
+    segment : Segment
+        Where it is in the log.
+    mean_input, mean_output : float
+        Means over the estimation part (the static map's point), input and output units.
+    period_s : float or None
+        Period of the input if it is periodic, s.
+    fft : FreqResp
+        The paper's FFT ratio.
+    h1 : FreqResp
+        Welch H1 with coherence and uncertainty (shared grid).
+    t_holdout_s : ndarray
+        Times of the held-out samples (analysis rate), s.
+    y_holdout : ndarray
+        Measured output there (block means).
+    y_hat_holdout : ndarray
+        Simulated output there.
+    compare_fit_pct : float
+        ``100 (1 - NRMSE)`` on the held-out part (``nan`` without validation).
+    """
+
+    segment: Segment
+    mean_input: float
+    mean_output: float
+    period_s: float | None
+    fft: FreqResp
+    h1: FreqResp
+    t_holdout_s: np.ndarray
+    y_holdout: np.ndarray
+    y_hat_holdout: np.ndarray
+    compare_fit_pct: float
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Held-out time-domain score of the model.
+
+    Attributes
+    ----------
+    compare_fit_pct : float
+        ``100 (1 - NRMSE)`` pooled over the operating points: ``NRMSE =
+        sqrt(sum ||y - y_hat||^2 / sum ||y - mean_k(y)||^2)``, each held-out part
+        centred on its own mean.
+    nrmse : float
+        That NRMSE.
+    per_segment_pct : list of float
+        The fit of each operating point.
+    holdout_fraction : float
+        Part of each operating point held out.
+    """
+
+    compare_fit_pct: float
+    nrmse: float
+    per_segment_pct: list[float]
+    holdout_fraction: float
+
+
+@dataclass(frozen=True)
+class IdentResult:
+    """Everything :func:`identify` found. See :meth:`to_model_json` for MODEL.json.
+
+    Attributes
+    ----------
+    points : list of OperatingPoint
+        Per operating point: segment, means, FFT ratio, H1, held-out validation.
+    skipped : list of SkippedPart
+        Pieces of the log that were not operating points (holds, short pieces).
+    pooled : FreqResp
+        Inverse-variance mean over the operating points of the estimate used
+        (``estimator``).
+    fit_data : FreqResp
+        What the transfer function was fitted to (``pooled``, log-binned for dense
+        line estimates).
+    estimator : str
+        ``"periodic_fft"`` (periodic input in every operating point: the FFT ratio
+        over whole periods, leakage-free) or ``"welch_h1"``.
+    static_map : StaticMap
+        ``h_s``: mean output against mean input.
+    fit : TFFit
+        The transfer function ``G(s)`` and its quality.
+    dependence : DependenceTest
+        Whether the dynamics depend on the operating point.
+    validation : Validation or None
+        Held-out time-domain score (None with ``holdout_fraction = 0``).
+    band_hz : (float, float)
+        Band analysed, Hz.
+    rate_hz, analysis_rate_hz : float
+        Sample rate of the log and rate after block averaging, Hz.
+    input_name, output_name, input_unit, output_unit : str
+        Signals and units.
+    options : IdentOptions
+        Settings used.
+    notes : list of str
+        Remarks (resampling, estimator choice, loader notes).
+    timings_s : dict of str to float
+        Wall time per stage, s.
+    """
+
+    points: list[OperatingPoint]
+    skipped: list[SkippedPart]
+    pooled: FreqResp
+    fit_data: FreqResp
+    estimator: str
+    static_map: StaticMap
+    fit: TFFit
+    dependence: DependenceTest
+    validation: Validation | None
+    band_hz: tuple[float, float]
+    rate_hz: float
+    analysis_rate_hz: float
+    input_name: str
+    output_name: str
+    input_unit: str
+    output_unit: str
+    options: IdentOptions
+    notes: list[str] = field(default_factory=list)
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def model(self):
+        """The fitted :class:`~hasel.ident.tffit.TFModel`."""
+        return self.fit.model
+
+    @property
+    def gain_unit(self) -> str:
+        """``output/input`` unit of the model, e.g. ``mm/kV``."""
+        return f"{self.output_unit or '1'}/{self.input_unit or '1'}"
+
+    def summary_lines(self) -> list[str]:
+        """A short human summary: order, static gain, fit, verdict."""
+        m = self.fit.model
+        lines = [
+            f"operating points: {len(self.points)} "
+            f"({', '.join(f'{p.mean_input:.3g}' for p in self.points)}{(' ' + self.input_unit) if self.input_unit else ''})",
+            f"model order: {self.fit.nz} zeros / {self.fit.np} poles"
+            + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else ""),
+            f"static gain G(0): {m.dc_gain:.4g} {self.gain_unit}; static map slope at the mean offset: "
+            f"{float(self.static_map.slope(np.mean(self.static_map.offsets))):.4g} {self.gain_unit} "
+            f"(degree {self.static_map.degree})",
+            f"frequency-domain fit over {self.fit.band_hz[0]:.3g}-{self.fit.band_hz[1]:.3g} Hz: "
+            f"{self.fit.fit_percent:.1f} %, rms {self.fit.rms_db:.2g} dB / {self.fit.rms_deg:.2g} deg",
+        ]
+        if self.validation is not None:
+            lines.append(f"held-out time-domain fit (compare): {self.validation.compare_fit_pct:.1f} % "
+                         f"(NRMSE {self.validation.nrmse:.3g})")
+        lines.append(f"offset dependence: {self.dependence.summary}")
+        return lines
+
+    def paper_comparison(self, f_lo_hz: float = 0.1, f_hi_hz: float = 15.0) -> dict[str, float]:
+        """Largest magnitude (dB) and phase (deg) differences of the fit from the paper's P(s)."""
+        from hasel.paper import plant_tf
+
+        num, den = plant_tf()
+        f = np.geomspace(f_lo_hz, f_hi_hz, 400)
+        P = np.polyval(num, 2j * np.pi * f) / np.polyval(den, 2j * np.pi * f)
+        r = self.fit.model.freqresp(f) / P
+        return {"band_hz": [f_lo_hz, f_hi_hz], "max_db": float(np.max(np.abs(20 * np.log10(np.abs(r))))),
+                "max_deg": float(np.max(np.abs(np.degrees(np.angle(r))))),
+                "static_gain_ratio": float(self.fit.model.dc_gain / (num[-1] / den[-1]))}
+
+    def to_model_json(self) -> dict[str, Any]:
+        """MODEL.json: ``{"num": [...], "den": [...]}`` (descending powers of s) and more keys.
+
+        Extra keys: ``delay_s``, ``zeros``/``poles`` (``[re, im]`` pairs, rad/s),
+        ``gain`` (zero-pole-gain ``k``), ``static_gain`` (``G(0)``), ``order``,
+        ``units``, ``signals``, ``frequency_band_hz``, ``fit`` (quality and the order
+        scores), ``static_map``, ``operating_points``, ``offset_dependence``,
+        ``validation``, ``sample_rate_hz``, ``analysis_rate_hz``, ``notes`` and, for a
+        kV -> mm model, ``vs_paper`` (differences from the paper's P(s)).
+        """
+        import hasel
+
+        m = self.fit.model
+
+        def pairs(z: np.ndarray) -> list[list[float]]:
+            z = np.asarray(z, complex)
+            z = z[np.lexsort((np.imag(z), np.real(z)))]
+            return [[float(np.real(v)), float(np.imag(v))] for v in z]
+
+        def fin(v: float) -> float | None:
+            return float(v) if v is not None and math.isfinite(v) else None
+
+        out: dict[str, Any] = {
+            "num": [float(c) for c in m.num],
+            "den": [float(c) for c in m.den],
+            "delay_s": float(m.delay_s),
+            "zeros": pairs(m.zeros),
+            "poles": pairs(m.poles),
+            "gain": float(m.gain),
+            "static_gain": fin(m.dc_gain),
+            "order": {"nz": self.fit.nz, "np": self.fit.np},
+            "units": {"input": self.input_unit, "output": self.output_unit, "gain": self.gain_unit,
+                      "time": "s", "frequency": "Hz", "s": "rad/s"},
+            "signals": {"input": self.input_name, "output": self.output_name},
+            "frequency_band_hz": [float(self.fit.band_hz[0]), float(self.fit.band_hz[1])],
+            "fit": {
+                "method": "Sanathanan-Koerner start, then weighted log-error least squares; stable poles; "
+                          "order chosen on held-out frequencies",
+                "cost": fin(self.fit.cost), "rms_db": fin(self.fit.rms_db), "max_db": fin(self.fit.max_db),
+                "rms_deg": fin(self.fit.rms_deg), "max_deg": fin(self.fit.max_deg),
+                "fit_percent": fin(self.fit.fit_percent),
+                "order_scores": [{"nz": s.nz, "np": s.np, "fit_cost": fin(s.fit_cost),
+                                  "heldout_cost": fin(s.heldout_cost)} for s in self.fit.scores],
+            },
+            "static_map": {**self.static_map.to_json(), "input_unit": self.input_unit,
+                           "output_unit": self.output_unit},
+            "operating_points": [{
+                "offset": float(p.segment.offset), "mean_input": float(p.mean_input),
+                "mean_output": float(p.mean_output), "t_start_s": float(p.segment.start_s),
+                "t_end_s": float(p.segment.end_s), "source": p.segment.source,
+                "period_s": p.period_s, "compare_fit_pct": fin(p.compare_fit_pct)} for p in self.points],
+            "offset_dependence": self.dependence.to_json(),
+            "validation": None if self.validation is None else {
+                "compare_fit_pct": fin(self.validation.compare_fit_pct), "nrmse": fin(self.validation.nrmse),
+                "per_segment_pct": [fin(v) for v in self.validation.per_segment_pct],
+                "holdout_fraction": self.validation.holdout_fraction},
+            "sample_rate_hz": float(self.rate_hz),
+            "analysis_rate_hz": float(self.analysis_rate_hz),
+            "notes": list(self.notes),
+            "tool": "hasel identify",
+            "version": hasel.__version__,
+        }
+        if self.input_unit == "kV" and self.output_unit == "mm":
+            out["vs_paper"] = self.paper_comparison()
+        return out
+
+
+# -- input checks ------------------------------------------------------------------------------------
+
+def check_signals(t_s: Any, u: Any, y: Any, *, input_name: str = "input",
+                  output_name: str = "output") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check and convert ``(t_s, u, y)``; raise :class:`BadInputError` with one clear line.
+
+    Parameters
+    ----------
+    t_s, u, y : array_like, shape (n,)
+        Times (s), input and output.
+    input_name, output_name : str
+        Names used in the messages.
+
+    Returns
+    -------
+    (t_s, u, y) : tuple of ndarray of float
+    """
+    arrs = []
+    for name, a in (("time", t_s), (input_name, u), (output_name, y)):
+        try:
+            x = np.asarray(a, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise BadInputError(f"{name} must be numeric samples") from err
+        if x.ndim != 1:
+            raise BadInputError(f"{name} must be a 1-D array of samples, got shape {x.shape}")
+        arrs.append(x)
+    t, uu, yy = arrs
+    if not (t.size == uu.size == yy.size):
+        raise BadInputError(f"time, {input_name} and {output_name} must have one length, got "
+                            f"{t.size}, {uu.size}, {yy.size}")
+    if t.size < 64:
+        raise BadInputError(f"the log is too short: {t.size} samples (need at least 64)")
+    for name, x in (("time", t), (input_name, uu), (output_name, yy)):
+        bad = ~np.isfinite(x)
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            where = f" (t = {t[i]:.6g} s)" if name != "time" and np.isfinite(t[i]) else ""
+            raise BadInputError(f"{name} has {int(bad.sum())} non-finite value(s) (NaN/inf), the first at "
+                                f"sample {i}{where}")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise BadInputError(f"time is not strictly increasing at sample {i + 1} "
+                            f"(t = {t[i]:.9g} s then {t[i + 1]:.9g} s)")
+    if np.ptp(uu) <= 1e-12 * max(1.0, float(np.max(np.abs(uu)))):
+        raise BadInputError(f"{input_name} is constant ({uu[0]:.6g}): no excitation to identify from")
+    return t, uu, yy
+
+
+def _uniform(t: np.ndarray, u: np.ndarray, y: np.ndarray, notes: list[str]) -> tuple[np.ndarray, ...]:
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    if np.max(np.abs(dt - med)) <= 0.01 * med:
+        return t, u, y, med
+    gaps = int(np.count_nonzero(dt > 1.5 * med))
+    tu = t[0] + med * np.arange(int(np.floor((t[-1] - t[0]) / med)) + 1)
+    notes.append(f"irregular sampling (median step {med:.6g} s, {gaps} gap(s) over 1.5 steps): "
+                 f"resampled onto a uniform grid by linear interpolation")
+    return tu, np.interp(tu, t, u), np.interp(tu, t, y), med
+
+
+def _refine_period(u: np.ndarray, approx_samples: float) -> float:
+    """Period in samples near ``approx_samples`` with the best normalised correlation (whole samples)."""
+    x = u - np.mean(u)
+    k0 = int(round(approx_samples))
+    best, best_k = -np.inf, k0
+    for k in range(max(1, k0 - 3), k0 + 4):
+        if k >= x.size:
+            break
+        a, b = x[:-k], x[k:]
+        r = float(a @ b) / math.sqrt(float(a @ a) * float(b @ b) or 1.0)
+        if r > best:
+            best, best_k = r, k
+    return float(best_k)
+
+
+def _blocks(x: np.ndarray, m: int) -> np.ndarray:
+    n = x.size // m
+    return x[: n * m].reshape(n, m).mean(axis=1) if m > 1 else x
+
+
+def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float, float]] | None = None,
+             options: IdentOptions | None = None, input_name: str = "input", output_name: str = "output",
+             input_unit: str | None = None, output_unit: str | None = None,
+             progress: Callable[[str], None] | None = None, **overrides: Any) -> IdentResult:
+    """Identify a SISO system from a log holding one or more operating points.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Sample times, s, strictly increasing.
+    u, y : array_like, shape (n,)
+        Input and output samples (any units; kV and mm for the actuator).
+    segments : sequence of (t_start_s, t_end_s, offset), optional
+        Explicit operating points; they replace the detection. An empty sequence
+        counts as not given.
+    options : IdentOptions, optional
+        Settings; keyword ``overrides`` replace single fields (``band_hz=(0.1, 20)``).
+    input_name, output_name : str
+        Signal names (for messages, units and MODEL.json).
+    input_unit, output_unit : str, optional
+        Units (default: from the names' suffixes, ``voltage_kv`` -> kV).
+    progress : callable, optional
+        Called with a short message at each stage.
+
+    Returns
+    -------
+    IdentResult
+
+    Raises
+    ------
+    BadInputError
+        For unusable data (too short, NaN, time not increasing, constant input, no
+        operating point with excitation) or options.
+    """
+    opts = options or IdentOptions()
+    if overrides:
+        names = {f.name for f in fields(IdentOptions)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise BadInputError(f"unknown identify option(s): {', '.join(unknown)}")
+        opts = replace(opts, **overrides)
+    if not 0.0 <= opts.holdout_fraction < 0.9:
+        raise BadInputError(f"holdout_fraction must be in [0, 0.9), got {opts.holdout_fraction}")
+    say = progress or (lambda msg: None)
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
+    notes: list[str] = []
+    t, uu, yy = check_signals(t_s, u, y, input_name=input_name, output_name=output_name)
+    t, uu, yy, dt = _uniform(t, uu, yy, notes)
+    rate = 1.0 / dt
+    in_unit = unit_from_name(input_name) if input_unit is None else input_unit
+    out_unit = unit_from_name(output_name) if output_unit is None else output_unit
+
+    # 1. operating points
+    say(f"finding operating points in {t.size} samples at {rate:.6g} Hz")
+    skipped: list[SkippedPart] = []
+    if segments:
+        segs = segments_from_markers(t, segments, settle_s=opts.settle_s)
+        # markers of holds (pre-conditioning, settling) carry no excitation: skip them
+        rms = [float(np.std(uu[s.i0:s.i1])) for s in segs]
+        top = max(rms)
+        skipped = [SkippedPart(s.start_s, s.end_s, s.offset, "marked part without excitation (a hold)")
+                   for s, r in zip(segs, rms) if r <= 0.1 * top]
+        segs = [s for s, r in zip(segs, rms) if r > 0.1 * top]
+    else:
+        found = find_segments(t, uu, window_s=opts.window_s, min_step=opts.min_step, settle_s=opts.settle_s)
+        segs, skipped = found.segments, found.skipped
+    if not segs:
+        raise BadInputError(f"no operating point with excitation found in {input_name} "
+                            f"({len(skipped)} hold(s) or short piece(s) skipped)")
+    lap("segments")
+
+    # 2. band and analysis rate
+    longest = max(segs, key=lambda s: s.i1 - s.i0)
+    if opts.band_hz is not None:
+        band = (float(opts.band_hz[0]), float(opts.band_hz[1]))
+        if not (0 <= band[0] < band[1]):
+            raise BadInputError(f"band_hz must be (low, high) with 0 <= low < high, got {opts.band_hz}")
+    else:
+        band = excited_band(uu[longest.i0:longest.i1], rate)
+    if band[0] >= rate / 2:
+        raise BadInputError(f"the band {band[0]:g}-{band[1]:g} Hz lies above the Nyquist frequency {rate / 2:g} Hz")
+    band = (band[0], min(band[1], rate / 2))
+    target = opts.analysis_rate_hz if opts.analysis_rate_hz is not None else 20.0 * band[1]
+    M = max(1, int(rate // target))
+    fs = rate / M
+    hold = opts.holdout_fraction
+    lap("band")
+
+    # decimate each operating point, split estimation / held-out
+    say(f"{len(segs)} operating point(s); band {band[0]:.3g}-{band[1]:.3g} Hz; analysing at {fs:.6g} Hz")
+    dec = []
+    for s in segs:
+        ud, yd = _blocks(uu[s.i0:s.i1], M), _blocks(yy[s.i0:s.i1], M)
+        k_est = int(round((1.0 - hold) * ud.size))
+        dec.append((ud, yd, k_est))
+    n_est_min = min(k for _, _, k in dec)
+    try:
+        plan = welch_plan(n_est_min, fs, band, bins_per_octave=opts.bins_per_octave,
+                          min_averages=opts.min_averages)
+    except BadInputError as err:
+        raise BadInputError(f"the operating points are too short for the band {band[0]:.3g}-{band[1]:.3g} Hz: "
+                            f"{err}") from err
+    band_lines = band
+    band = (max(band[0], 2 * fs / plan[0].nperseg), band[1])
+    lap("decimate")
+
+    # 3. per operating point: FFT ratio, H1, means
+    say("frequency responses (FFT ratio and Welch H1 with coherence)")
+    h1s: list[FreqResp] = []
+    periods: list[float | None] = []
+    means: list[tuple[float, float]] = []
+    for s, (ud, yd, k_est) in zip(segs, dec):
+        h1s.append(welch_h1(ud[:k_est], yd[:k_est], fs, plan=plan, band_hz=band))
+        p_d = detect_period(ud, fs, min_period_s=4.0 / band[1])
+        periods.append(None if p_d is None else _refine_period(uu[s.i0:s.i1], p_d * rate) / rate)
+        means.append((float(np.mean(ud[:k_est])), float(np.mean(yd[:k_est]))))
+    n_per = [None if p is None else int(round(p * rate)) for p in periods]
+    periodic = all(n is not None and n * 1 <= dec[i][2] * M for i, n in enumerate(n_per)) and \
+        len({n for n in n_per}) == 1
+    ffts: list[FreqResp] = []
+    for s, (_, _, k_est), p in zip(segs, dec, periods):
+        n_raw = k_est * M
+        ffts.append(fft_ratio(uu[s.i0:s.i0 + n_raw], yy[s.i0:s.i0 + n_raw], rate,
+                              band_hz=band_lines if periodic else band, period_s=p if periodic else None))
+    if periodic:
+        estimator = "periodic_fft"
+        notes.append(f"periodic input (period {n_per[0] / rate:.6g} s): the fit and the dependence test use the "
+                     "leakage-free FFT ratio over whole periods")
+    else:
+        estimator = "welch_h1"
+    lap("freqresp")
+
+    say("static map and operating-point dependence test")
+    smap = fit_static_map([m[0] for m in means], [m[1] for m in means])
+    used = ffts if periodic else h1s
+    dep = offset_dependence(used, coherence_min=opts.coherence_min, alpha=opts.alpha, tol_db=opts.tol_db,
+                            tol_deg=opts.tol_deg, unit=in_unit, thin=1 if periodic else 2)
+    pooled = pool(used)
+    fit_data = log_bin(pooled, per_octave=2 * opts.bins_per_octave) if periodic else pooled
+    lap("static_dependence")
+
+    # 5. transfer-function fit
+    say("transfer-function fit" + (f" of order {opts.order}" if opts.order else
+                                   f" (choosing the order, up to {opts.max_poles} poles)"))
+    if opts.order is not None:
+        fit = fit_tf_order(fit_data.f_hz, fit_data.H, int(opts.order[0]), int(opts.order[1]),
+                           sigma=fit_data.sigma, delay=opts.delay, rel_floor=opts.rel_floor)
+    else:
+        fit = fit_tf(fit_data.f_hz, fit_data.H, sigma=fit_data.sigma, max_poles=opts.max_poles,
+                     delay=opts.delay, rel_floor=opts.rel_floor)
+    lap("tffit")
+
+    # 6. validation on the held-out tails
+    points: list[OperatingPoint] = []
+    validation = None
+    num2 = den2 = 0.0
+    per_pct: list[float] = []
+    if hold > 0:
+        say("time-domain validation on held-out data")
+    for s, (ud, yd, k_est), h1, ff, per, (mu, my) in zip(segs, dec, h1s, ffts, periods, means):
+        th = s.start_s + (np.arange(ud.size) + 0.5) * M / rate
+        if hold > 0 and ud.size - k_est >= 2:
+            yhat = float(smap(mu)) + simulate(fit.model, ud - mu, fs)
+            yh, yv = yhat[k_est:], yd[k_est:]
+            pct = compare_fit(yv, yh)
+            num2 += float(np.sum((yv - yh) ** 2))
+            den2 += float(np.sum((yv - yv.mean()) ** 2))
+            per_pct.append(pct)
+            points.append(OperatingPoint(s, mu, my, per, ff, h1, th[k_est:], yv, yh, pct))
+        else:
+            e = np.zeros(0)
+            points.append(OperatingPoint(s, mu, my, per, ff, h1, e, e, e, float("nan")))
+    if per_pct and den2 > 0:
+        nr = math.sqrt(num2 / den2)
+        validation = Validation(compare_fit_pct=100.0 * (1.0 - nr), nrmse=nr, per_segment_pct=per_pct,
+                                holdout_fraction=hold)
+    lap("validation")
+    return IdentResult(points=points, skipped=skipped, pooled=pooled, fit_data=fit_data, estimator=estimator,
+                       static_map=smap, fit=fit, dependence=dep,
+                       validation=validation, band_hz=band, rate_hz=rate, analysis_rate_hz=fs,
+                       input_name=input_name, output_name=output_name, input_unit=in_unit, output_unit=out_unit,
+                       options=opts, notes=notes, timings_s=timings)
