@@ -400,9 +400,24 @@ class _Scan:
                     self.progress(block.offset / stream.size)
         except CdrError as err:
             raise DataFileError(f"{self.path}: {err}") from None
+        except DataFileError:
+            raise
+        except BadInputError:
+            # a field or topic the data section names differently: damage shows up later
+            # (CRCs are checked at the end), so look for it before blaming the request
+            self._raise_if_damaged()
+            raise
         if self.progress is not None:
             self.progress(1.0)
         self._check_topics()
+
+    def _raise_if_damaged(self) -> None:
+        check = McapStream(self.path, tolerant=True)
+        for _ in check:
+            pass
+        if check.damages or not check.footer:
+            what = check.damages[0] if check.damages else "no footer"
+            raise DataFileError(f"{self.path}: damaged MCAP: {what}") from None
 
     def _check_topics(self) -> None:
         missing = [t for t in self.wanted if t not in self.by_topic]

@@ -509,10 +509,10 @@ def head_bytes(op: int, ln: int) -> bytes:
 
 
 def _plausible_chunk(buf: bytes, i: int, remaining: int) -> bool:
+    if i + 9 + 32 > len(buf):
+        return False
     op, ln = _OPLEN(buf, i)
     if op != Op.CHUNK or ln < 40 or ln > remaining - 9 or ln > MAX_RECORD_BYTES:
-        return False
-    if i + 9 + 32 > len(buf):
         return False
     clen = _U32(buf, i + 9 + 28)[0]
     if clen > 8 or i + 9 + 32 + clen + 8 > len(buf):
@@ -589,12 +589,14 @@ def read_summary(path: str | os.PathLike[str]) -> Summary | None:
             op, ln = _OPLEN(tail, 0)
             if op != Op.FOOTER or ln != 20:
                 return None
-            summary_start, _, _ = _FOOTER(tail, 9)
+            summary_start, _, summary_crc = _FOOTER(tail, 9)
             end = size - 37
             if not summary_start or summary_start > end or end - summary_start > MAX_RECORD_BYTES:
                 return None
             f.seek(summary_start)
             buf = f.read(end - summary_start)
+            if summary_crc and zlib.crc32(tail[:25], zlib.crc32(buf)) != summary_crc:
+                return None
     except (OSError, _Bad, struct.error):
         return None
     out = Summary(header, {}, {})

@@ -60,7 +60,8 @@ class SalvageReport:
 
     def summary(self) -> str:
         """A few human lines about the result."""
-        lines = [f"{self.destination}: {self.messages} messages on {len(self.topics)} topics "
+        k = len(self.topics)
+        lines = [f"{self.destination}: {self.messages} messages on {k} topic{'' if k == 1 else 's'} "
                  f"from {self.chunks} intact chunks of {self.source}"]
         if self.intact:
             lines.append("the source was not damaged: the copy is complete")

@@ -411,6 +411,7 @@ class Ros2McapWriter:
 
     def _close_chunk(self) -> None:
         if not self._chunk:
+            self._index = {}
             return
         data = bytes(self._chunk)
         comp = self._compress(data)
@@ -535,6 +536,7 @@ class Ros2McapWriter:
                 os.fsync(self._f.fileno())
         finally:
             self._closed = True
+            self._index = {}
             if self._syncer is not None:
                 self._syncer.stop()
             self._f.close()
