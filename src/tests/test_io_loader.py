@@ -211,3 +211,24 @@ def test_rosbag2_files_load_like_mcap_ros2_decodes_them(bag, field, count):
 def test_undecodable_schema_is_a_data_file_error():
     with pytest.raises(DataFileError, match=r"cannot decode topic /test_service1/_service_event .*'---'"):
         load_signals(ROSBAG2 / "bag_with_topics_and_service_events.mcap", ["/test_service1/_service_event.x"])
+
+
+def test_big_endian_message_in_a_chunk_takes_the_slow_path(tmp_path):
+    """A CDR_BE message among CDR_LE ones: the chunk is redone message by message, same result."""
+    import struct
+
+    def be_stroke(sec, stroke):
+        payload = struct.pack(">iI", sec, 0) + struct.pack(">I", 1) + b"\x00"
+        payload += b"\x00" * ((-len(payload)) % 8) + struct.pack(">d", stroke) + b"\x02"
+        return b"\x00\x00\x00\x00" + payload
+
+    path = tmp_path / "be.mcap"
+    with Ros2McapWriter(path) as w:
+        c = w.add_topic("/s", "hasel_msgs/msg/Stroke")
+        for i in range(6):
+            data = be_stroke(i + 1, i * 1.5) if i == 3 else encode(
+                "hasel_msgs/msg/Stroke", {"header": {"stamp": {"sec": i + 1}}, "stroke_mm": i * 1.5})
+            w.write(c, data, i, i)
+    sig = load_signals(path, ["/s.stroke_mm"])["/s.stroke_mm"]
+    np.testing.assert_array_equal(sig.values, np.arange(6) * 1.5)
+    np.testing.assert_array_equal(sig.t_s, np.arange(1, 7))

@@ -44,6 +44,10 @@ class _Overrun(Exception):
     pass
 
 
+class ForeignMessage(Exception):
+    """A message that the fast loop does not take (not CDR little endian)."""
+
+
 def _str_at(mv: Any, start: int, n: int) -> str:
     if n <= 1:
         return ""
@@ -321,31 +325,37 @@ class _Gen:
         return cnt
 
 
-def _generate(specs: Mapping[str, MsgSpec], root: str, requests: Sequence[tuple[str, FieldRequest]],
-              endian: str, fname: str) -> Callable[..., tuple[Any, ...]]:
+def _walker(specs: Mapping[str, MsgSpec], root: str, requests: Sequence[tuple[str, FieldRequest]],
+            endian: str, indent: int) -> tuple[list[str], dict[str, Any]]:
+    """Lines that walk one message at ``o``..``end`` of ``mv``, leaving request i in ``v{i}``."""
     gen = _Gen(specs, endian)
     wanted: dict[tuple[str, ...], list[tuple[int | None, str, str]]] = {}
-    out_vars: list[str] = []
     for i, (path, req) in enumerate(requests):
         steps = _parse_path(path)
         key = tuple(s for s, _ in steps)
-        var = f"v{i}"
-        wanted.setdefault(key, []).append((steps[-1][1], req.kind, var))
-        out_vars.append(var)
-    body = gen.lines
-    gen.emit("b = o + 4", 1)
-    gen.emit("p = b", 1)
-    remaining = [len(requests)]
-    gen.walk(resolve_type(specs, root), wanted, (), remaining, 1)
-    gen.flush(1)
-    gen.emit("if p > end: raise _Overrun", 1)
-    gen.emit("return (" + "".join(v + ", " for v in out_vars) + ")", 1)
-    src = f"def {fname}(mv, o, end):\n" + "\n".join(body) + "\n"
-    ns = dict(gen.ns)
-    exec(compile(src, f"<cdr {root} {endian}>", "exec"), ns)  # noqa: S102 - generated from parsed types only
+        wanted.setdefault(key, []).append((steps[-1][1], req.kind, f"v{i}"))
+    gen.emit("b = o + 4", indent)
+    gen.emit("p = b", indent)
+    gen.walk(resolve_type(specs, root), wanted, (), [len(requests)], indent)
+    gen.flush(indent)
+    gen.emit("if p > end: raise _Overrun", indent)
+    return gen.lines, gen.ns
+
+
+def _compile(src: str, ns: dict[str, Any], fname: str, label: str) -> Callable[..., Any]:
+    ns = dict(ns)
+    exec(compile(src, f"<cdr {label}>", "exec"), ns)  # noqa: S102 - generated from parsed types only
     fn = ns[fname]
-    fn.__source__ = src  # type: ignore[attr-defined]
+    fn.__source__ = src
     return fn  # type: ignore[no-any-return]
+
+
+def _generate(specs: Mapping[str, MsgSpec], root: str, requests: Sequence[tuple[str, FieldRequest]],
+              endian: str, fname: str) -> Callable[..., tuple[Any, ...]]:
+    lines, ns = _walker(specs, root, requests, endian, 1)
+    lines.append("    return (" + "".join(f"v{i}, " for i in range(len(requests))) + ")")
+    src = f"def {fname}(mv, o, end):\n" + "\n".join(lines) + "\n"
+    return _compile(src, ns, fname, f"{root} {endian}")
 
 
 def _classify(specs: Mapping[str, MsgSpec], root: str, path: str) -> FieldRequest:
@@ -426,9 +436,26 @@ class Extractor:
                 return self._le(buf, start, end)
             if buf[start] == 0 and kind == 0:
                 return self._big_endian()(buf, start, end)
-        except (_Overrun, struct.error, IndexError) as err:
+        except (_Overrun, struct.error, IndexError, ValueError) as err:
             raise CdrError(f"{self.root} message of {end - start} bytes is truncated or corrupt") from err
         raise CdrError(f"{self.root} message: unsupported CDR encapsulation 0x{buf[start]:02x}{kind:02x}")
+
+    def make_loop(self, sink_args: Sequence[str], sink_lines: Sequence[str]) -> Callable[..., None]:
+        """A function ``loop(buf, mv, items, *sinks)`` decoding many CDR_LE messages in one call.
+
+        ``items`` holds ``(log_time, publish_time, sequence, start, end)`` per message;
+        after each message the ``sink_lines`` run with ``v{i}`` (request i) and ``lt``
+        (log time) set, calling the sinks passed as ``sink_args``. Raises
+        :class:`ForeignMessage` at the first message that is not CDR_LE, and the walker's
+        exceptions on damage: the caller rolls back and takes the per-message path.
+        """
+        lines, ns = _walker(self.specs, self.root, self._reqs, "<", 2)
+        ns["ForeignMessage"] = ForeignMessage
+        head = ["def _loop(buf, mv, items, " + ", ".join(sink_args) + "):",
+                "    for lt, _pt, _sq, o, end in items:",
+                "        if buf[o] != 0 or buf[o + 1] != 1: raise ForeignMessage"]
+        src = "\n".join(head + lines + ["        " + x for x in sink_lines]) + "\n"
+        return _compile(src, ns, "_loop", f"{self.root} loop")
 
     @property
     def little_endian(self) -> Callable[..., tuple[Any, ...]]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -24,7 +25,7 @@ _PROGRESS_MIN_BYTES = 64 << 20
 
 def _progress(label: str, size: int) -> Callable[[float], None] | None:
     """A progress printer on stderr (at most twice a second), for files big enough to need one."""
-    if size < _PROGRESS_MIN_BYTES:
+    if size < _PROGRESS_MIN_BYTES or not sys.stderr.isatty():
         return None
     last = [0.0]
 
@@ -42,8 +43,6 @@ def _progress(label: str, size: int) -> Callable[[float], None] | None:
 
 def _size(path: str) -> int:
     try:
-        import os
-
         return os.path.getsize(path)
     except OSError:
         return 0

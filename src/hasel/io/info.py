@@ -16,6 +16,7 @@ from pathlib import Path
 from hasel.errors import DataFileError
 from hasel.io.mcapfile import ChannelRecord, Damage, McapStream, SchemaRecord, read_summary
 from hasel.io.msgdefs import MessageDefinitionError, parse_schema
+from hasel.io.timeconv import NS_PER_S, ns_to_s
 
 __all__ = ["TopicStats", "InfoReport", "info", "format_info", "format_size"]
 
@@ -48,7 +49,7 @@ class TopicStats:
         """Mean message rate, Hz (NaN with fewer than two messages)."""
         if self.count < 2 or self.last_ns <= self.first_ns:
             return math.nan
-        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+        return (self.count - 1) / ns_to_s(self.last_ns - self.first_ns)
 
 
 @dataclass
@@ -75,7 +76,7 @@ class InfoReport:
     @property
     def duration_s(self) -> float:
         """Log time from the first to the last message, s."""
-        return (self.end_ns - self.start_ns) * 1e-9
+        return ns_to_s(self.end_ns - self.start_ns)
 
 
 def _schema_error(schema: SchemaRecord | None) -> str:
@@ -183,7 +184,7 @@ def format_size(n: int) -> str:
 
 
 def _format_time(ns: int) -> str:
-    sec, rem = divmod(ns, 1_000_000_000)
+    sec, rem = divmod(ns, NS_PER_S)
     ms = rem // 1_000_000
     tm = time.localtime(sec)
     return f"{time.strftime('%b %e %Y %H:%M:%S', tm)}.{ms:03d} ({sec}.{ms:03d})"
@@ -210,7 +211,7 @@ def format_info(report: InfoReport) -> str:
     for t in report.topics:
         r = t.rate_hz
         rate = f"{r:.4g} Hz" if math.isfinite(r) else "-"
-        rate_lines.append(f"{t.topic}: {rate} ({t.count} messages over {(t.last_ns - t.first_ns) * 1e-9:.3f} s)")
+        rate_lines.append(f"{t.topic}: {rate} ({t.count} messages over {ns_to_s(t.last_ns - t.first_ns):.3f} s)")
     lines.append("Topic rates:       " + ("\n" + ind).join(rate_lines))
     bad = [t for t in report.topics if t.schema_error]
     if bad:

@@ -27,6 +27,7 @@ from hasel.errors import BadInputError, DataFileError
 from hasel.io.cdr import CdrError, Extractor, FieldRequest, numeric_fields
 from hasel.io.mcapfile import ChannelRecord, McapStream, SchemaRecord, read_summary
 from hasel.io.msgdefs import MessageDefinitionError, MsgSpec, parse_schema, resolve_type, short_name
+from hasel.io.timeconv import NS_PER_S
 
 __all__ = [
     "Signal", "TopicInfo", "Marker", "Segment", "MarkerSegment", "list_topics", "split_field_spec",
@@ -34,7 +35,7 @@ __all__ = [
 ]
 
 MARKER_TYPE = "hasel_msgs/ExperimentMarker"
-_NS = 1_000_000_000
+_NS = NS_PER_S
 _MARKER_FIELDS = ("label", "signal", "offset_kv", "amplitude_kv", "f0_hz", "f1_hz", "duration_s", "start")
 ProgressFn = Callable[[float], None]
 
@@ -226,44 +227,76 @@ class _Collector:
         self.slices: dict[str, list[Any]] = {f: [] for _, f, _ in self.array_cols}
         self.parts: dict[str, list[bytes]] = {f: [] for _, f, _ in self.array_cols}
         self.messages = 0
+        self._loop, self._sinks = self._make_loop()
+
+    def _make_loop(self) -> tuple[Callable[..., None], tuple[Callable[[Any], Any], ...]]:
+        """The generated per-chunk loop and the bound ``append`` methods it feeds."""
+        names: list[str] = ["T", "L"]
+        sinks: list[Callable[[Any], Any]] = [self.times.append, self.log_times.append]
+        lines = ["T(v0 * 1000000000 + v1)" if self.header else "T(lt)", "L(lt)"]
+        if self.array_cols:
+            names.append("P")
+            sinks.append(self.periods.append)
+            lines.append(f"P(v{self.npre - 1})")
+        for k, (j, f) in enumerate(self.scalar_cols):
+            names.append(f"S{k}")
+            sinks.append(self.scalars[f].append)
+            lines.append(f"S{k}(v{j})")
+        for k, (j, f) in enumerate(self.string_cols):
+            names.append(f"X{k}")
+            sinks.append(self.strings[f].append)
+            lines.append(f"X{k}(v{j})")
+        for k, (j, f, size) in enumerate(self.array_cols):
+            names += [f"A{k}", f"C{k}"]
+            sinks += [self.slices[f].append, self.counts[f].append]
+            lines += [f"A{k}(mv[v{j}[0]:v{j}[0] + {size} * v{j}[1]])", f"C{k}(v{j}[1])"]
+        return self.extractor.make_loop(names, lines), tuple(sinks)
+
+    def _sizes(self) -> list[int]:
+        return [len(self.times), len(self.log_times), len(self.periods)] + [
+            len(c) for c in self.scalars.values()] + [len(c) for c in self.strings.values()] + [
+            len(c) for c in self.counts.values()]
+
+    def _rollback(self, sizes: list[int]) -> None:
+        cols: list[Any] = [self.times, self.log_times, self.periods, *self.scalars.values(), *self.strings.values(),
+                           *self.counts.values()]
+        for col, n in zip(cols, sizes):
+            del col[n:]
+        for sl in self.slices.values():
+            sl.clear()
 
     def consume(self, buf: bytes, items: Sequence[tuple[int, int, int, int, int]]) -> None:
-        le = self.extractor.little_endian
-        ex = self.extractor
+        """Decode the requested fields of the messages ``items`` of one chunk ``buf``."""
         mv = memoryview(buf)
-        header = self.header
-        times = self.times
-        log_times = self.log_times
-        npre = self.npre
-        scalar_cols = [(j, self.scalars[f]) for j, f in self.scalar_cols]
-        array_cols = [(j, size, self.slices[f], self.counts[f]) for j, f, size in self.array_cols]
-        periods = self.periods
-        pi = npre - 1
-        for lt, _pt, _seq, s, e in items:
-            if buf[s] == 0 and buf[s + 1] == 1:
-                try:
-                    r = le(buf, s, e)
-                except Exception:  # noqa: BLE001 - re-decoded below for a clean CdrError
-                    r = ex(buf, s, e)
-            else:
-                r = ex(buf, s, e)
-            times.append(r[0] * _NS + r[1] if header else lt)
-            log_times.append(lt)
-            for j, col in scalar_cols:
-                col.append(r[j])
-            if array_cols:
-                periods.append(r[pi])
-                for j, size, sl, cnts in array_cols:
-                    off, n = r[j]
-                    sl.append(mv[off:off + size * n])
-                    cnts.append(n)
-            for j, f in self.string_cols:
-                self.strings[f].append(r[j])
+        sizes = self._sizes()
+        try:
+            self._loop(buf, mv, items, *self._sinks)
+        except Exception:  # noqa: BLE001 - big-endian or damaged: redo this chunk message by message
+            self._rollback(sizes)
+            self._consume_slow(buf, mv, items)
         self.messages += len(items)
         for f, sl in self.slices.items():  # copy out, so the chunk buffer can be freed
             if sl:
                 self.parts[f].append(b"".join(sl))
                 sl.clear()
+
+    def _consume_slow(self, buf: bytes, mv: memoryview, items: Sequence[tuple[int, int, int, int, int]]) -> None:
+        ex = self.extractor
+        pi = self.npre - 1
+        for lt, _pt, _seq, s, e in items:
+            r = ex(buf, s, e)  # raises CdrError on damage
+            self.times.append(r[0] * _NS + r[1] if self.header else lt)
+            self.log_times.append(lt)
+            for j, f in self.scalar_cols:
+                self.scalars[f].append(r[j])
+            for j, f in self.string_cols:
+                self.strings[f].append(r[j])
+            if self.array_cols:
+                self.periods.append(r[pi])
+                for j, f, size in self.array_cols:
+                    off, n = r[j]
+                    self.slices[f].append(mv[off:off + size * n])
+                    self.counts[f].append(n)
 
     def signals(self) -> dict[str, Signal]:
         out: dict[str, Signal] = {}
