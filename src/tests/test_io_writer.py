@@ -199,3 +199,41 @@ def test_sigkill_loses_only_the_open_chunk(tmp_path):
         reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
         seqs = [m.sequence for _, _, m, _ in reader.iter_decoded_messages(log_time_order=False)]
     assert seqs == list(range(report.messages))
+
+
+SIGTERM_CHILD = """
+import signal, sys
+from hasel.io import Ros2McapWriter, encode
+w = Ros2McapWriter(sys.argv[1], chunk_size=3000)
+c = w.add_topic('/s', 'hasel_msgs/msg/Stroke')
+def stop(signum, frame):
+    w.close()  # straight from the handler, whatever write() was doing
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stop)
+data = encode('hasel_msgs/msg/Stroke', {'stroke_mm': 1.0})
+i = 0
+while True:
+    w.write(c, data, i + 1, i + 1, i % 2**32)
+    i += 1
+    if i == 2000:
+        print('ready', flush=True)
+"""
+
+
+def test_close_from_a_sigterm_handler_leaves_a_valid_file(tmp_path):
+    path = tmp_path / "term.mcap"
+    proc = subprocess.Popen([sys.executable, "-c", SIGTERM_CHILD, str(path)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 0
+    proc.stdout.close()
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        stats = reader.get_summary().statistics
+        seqs = [m.sequence for _, _, m in reader.iter_messages(log_time_order=False)]
+    assert stats.message_count == len(seqs) >= 2000
+    assert seqs == list(range(len(seqs)))
+    with open(path, "rb") as f:  # the message indexes agree with the records
+        indexed = sum(1 for _ in make_reader(f).iter_messages(log_time_order=True))
+    assert indexed == len(seqs)

@@ -54,6 +54,9 @@ _CHUNK_HEAD = struct.Struct("<QQQI").pack
 _U32 = struct.Struct("<I").pack
 _U64 = struct.Struct("<Q").pack
 _MI_HEAD = struct.Struct("<BQHI").pack
+_OPLEN = struct.Struct("<BQ").unpack_from
+_CID = struct.Struct("<H").unpack_from
+_LT = struct.Struct("<Q").unpack_from
 
 # rmw enum values -> the names rosbag2 Jazzy writes (rmw_qos_*_policy_to_str; UNKNOWN -> "unknown")
 _HISTORY = {0: "system_default", 1: "keep_last", 2: "keep_all", 3: "unknown"}
@@ -385,11 +388,10 @@ class Ros2McapWriter:
         off = len(buf)
         if not off:
             self._deadline = log_time_ns + self._span_ns
-        try:
-            buf += _MSG_HEAD(5, 22 + len(data), channel_id, sequence, log_time_ns, publish_time_ns)
+        try:  # one += per record: a signal handler calling close() never sees half a record
+            buf += _MSG_HEAD(5, 22 + len(data), channel_id, sequence, log_time_ns, publish_time_ns) + data
         except struct.error as err:
             raise BadInputError(f"bad message fields (times must be uint64 ns, sequence uint32): {err}") from err
-        buf += data
         idx.append(log_time_ns)
         idx.append(off)
         if len(buf) >= self._chunk_size or log_time_ns >= self._deadline:
@@ -457,6 +459,19 @@ class Ros2McapWriter:
         self._index = {}
         self._sync()
 
+    def _reindex(self) -> None:
+        """Rebuild the message index of the open chunk from its records."""
+        index: dict[int, array[int]] = {}
+        buf = self._chunk
+        pos, n = 0, len(buf)
+        while pos + 31 <= n:
+            op, ln = _OPLEN(buf, pos)
+            if op == Op.MESSAGE:
+                cid, lt = _CID(buf, pos + 9)[0], _LT(buf, pos + 15)[0]
+                index.setdefault(cid, array("Q")).extend((lt, pos))
+            pos += 9 + ln
+        self._index = index
+
     def _sync(self) -> None:
         if self._fsync_interval is None:
             return
@@ -499,6 +514,7 @@ class Ros2McapWriter:
         if self._closed:
             return
         try:
+            self._reindex()  # close() may interrupt write() (signal handler): trust the records only
             self._close_chunk()
             self._emit(_record(DataEnd(data_section_crc=self._crc)))
             summary_start = self._pos
