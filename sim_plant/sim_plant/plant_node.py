@@ -91,6 +91,7 @@ class PlantNode(Node):
         self.done = False
         self.sequence = 0
         self._last_progress = time.monotonic()
+        self._waiters: list[tuple[float, object]] = []
 
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
             if self.clock_mode == "sim" else None
@@ -119,6 +120,23 @@ class PlantNode(Node):
 
     def _stamp(self, msg, ns: int) -> None:
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+
+    def notify_at(self, t_s: float, future) -> None:
+        """Complete ``future`` once simulated time reaches ``t_s`` (or the run is done)."""
+        if self.done or self.now_s() >= t_s - 1e-12:
+            future.set_result(self.now_s())
+        else:
+            self._waiters.append((t_s, future))
+
+    def _notify(self) -> None:
+        now = self.now_s()
+        keep = []
+        for t, fut in self._waiters:
+            if self.done or now >= t - 1e-12:
+                fut.set_result(now)
+            else:
+                keep.append((t, fut))
+        self._waiters = keep
 
     # -- lockstep -----------------------------------------------------------------------
     def _start_once(self) -> None:
@@ -177,6 +195,8 @@ class PlantNode(Node):
         if self.stop_at_s >= 0 and self.now_s() >= self.stop_at_s - 1e-12:
             self.done = True
         self._publish_tick()
+        if self._waiters:
+            self._notify()
 
     # -- wall mode ----------------------------------------------------------------------
     def on_wall_tick(self) -> None:

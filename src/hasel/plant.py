@@ -122,4 +122,7 @@ class NominalActuator:
     def run(self, command_kv: np.ndarray) -> ActuatorSamples:
         """Advance by the samples of ``command_kv`` (kV, at ``rate_hz``)."""
         u = np.asarray(command_kv, dtype=float)
+        if u.size > 1 and u[0] == u[-1] and np.all(u == u[0]):  # a held command: the fast exact path
+            return ActuatorSamples(applied_kv=self._amp.run_constant(float(u[0]), u.size),
+                                   stroke_mm=self._chain.run_constant(float(u[0]), u.size))
         return ActuatorSamples(applied_kv=self._amp.run(u), stroke_mm=self._chain.run(u))

@@ -35,3 +35,12 @@ def test_lowpass_starts_at_rest_on_first_sample_and_filters():
 def test_rejects_cutoff_above_nyquist():
     with pytest.raises(BadInputError, match="Nyquist"):
         butter2_lowpass_biquad(120.0, 200.0)
+
+
+def test_sample_by_sample_equals_scipy_sosfilt():
+    x = np.random.default_rng(2).normal(3.0, 1.0, 500)
+    lp = LowPass()
+    y = np.array([lp(float(v)) for v in x])
+    sos = signal.butter(2, 40.0, fs=200.0, output="sos")
+    ref, _ = signal.sosfilt(sos, x, zi=signal.sosfilt_zi(sos) * x[0])
+    np.testing.assert_allclose(y, ref, rtol=1e-12, atol=1e-12)

@@ -105,3 +105,12 @@ def test_critical_filter_has_3db_at_cutoff_and_nonnegative_impulse_response():
     sos = zoh_sos(num, den, 1e-4, output="end")
     h = signal.sosfilt(sos, np.r_[1.0, np.zeros(400)])
     assert h.min() >= -1e-15  # so the output stays within the range of the inputs
+
+
+def test_constant_block_path_equals_sosfilt():
+    sos = zoh_sos(*paper.plant_tf(), 1e-4, output="end")
+    a, b = SosFilter(sos), SosFilter(sos)
+    rng = np.random.default_rng(4)
+    for u in rng.uniform(0, 9, 200):
+        np.testing.assert_allclose(a.run_constant(float(u), 50), b.run(np.full(50, u)), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(a.zi, b.zi, rtol=1e-9, atol=1e-12)
