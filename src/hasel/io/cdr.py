@@ -31,7 +31,7 @@ from hasel.io.msgdefs import (
 )
 
 __all__ = ["CdrError", "FieldRequest", "Extractor", "compile_extractor", "numeric_fields",
-           "CdrEncoder", "encoder_for", "encode", "ENCAPSULATION_LE"]
+           "CdrEncoder", "encoder_for", "encode", "encode_sample_batch", "ENCAPSULATION_LE"]
 
 ENCAPSULATION_LE = b"\x00\x01\x00\x00"
 
@@ -603,3 +603,43 @@ def encoder_for(type_name: str, definition: str | None = None) -> CdrEncoder:
 def encode(type_name: str, msg: Any, definition: str | None = None) -> bytes:
     """CDR bytes of one message ``msg`` of ``type_name`` (see :class:`CdrEncoder`)."""
     return encoder_for(type_name, definition)(msg)
+
+
+_STAMP = struct.Struct("<iI").pack
+_F64 = struct.Struct("<d").pack
+
+
+def encode_sample_batch(stamp_ns: int, sample_period_s: float, voltage_kv: Any = (), stroke_mm: Any = (),
+                        true_stroke_mm: Any = (), elapsed_us: Any = (), frame_id: str = "") -> bytes:
+    """CDR bytes of a ``hasel_msgs/msg/SampleBatch``, fast (numpy arrays in, no per-value Python).
+
+    Parameters
+    ----------
+    stamp_ns : int
+        ``header.stamp``: time of sample 0, integer ns.
+    sample_period_s : float
+        Time between samples, s.
+    voltage_kv, stroke_mm, true_stroke_mm, elapsed_us : array_like
+        The four sample arrays (kV, mm, mm, us); empty when a signal is absent.
+    frame_id : str
+        ``header.frame_id``.
+
+    Returns
+    -------
+    bytes
+        Identical to :func:`encode` of the same message.
+    """
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    name = frame_id.encode("utf-8")
+    out = bytearray(ENCAPSULATION_LE)
+    out += _STAMP(sec, nanosec) + _PACK_U32(len(name) + 1) + name + b"\x00"
+    out += b"\x00" * ((-(len(out) - 4)) % 8)
+    out += _F64(float(sample_period_s))
+    for arr in (voltage_kv, stroke_mm, true_stroke_mm, elapsed_us):
+        a = np.asarray(arr, dtype="<f8").ravel()
+        out += b"\x00" * ((-(len(out) - 4)) % 4)
+        out += _PACK_U32(a.size)
+        if a.size:
+            out += b"\x00" * ((-(len(out) - 4)) % 8)
+            out += a.tobytes()
+    return bytes(out)

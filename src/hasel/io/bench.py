@@ -1,0 +1,132 @@
+"""Measurements of the I/O layer for ``hasel bench``: writer overhead and loading speed.
+
+- :func:`writer_overhead`: CPU time per message of :class:`Ros2McapWriter` against a bare
+  ``mcap.writer.Writer`` writing the same pre-serialised bytes with the same chunk size
+  and zstd level (the target is a ratio below 1.3).
+- :func:`load_speed`: a log of the paper's identification campaign size (18 segments x
+  60 s x 10 kHz, 50 samples per ``SampleBatch`` at 200 Hz, 10.8 M samples) is written,
+  then :func:`load_signals` reads ``voltage_kv`` and ``stroke_mm``; samples per second.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hasel.io.cdr import encode, encode_sample_batch
+from hasel.io.loader import load_signals
+from hasel.io.msgdefs import message_definition
+from hasel.io.writer import DEFAULT_CHUNK_SIZE, Ros2McapWriter
+
+__all__ = ["writer_overhead", "load_speed"]
+
+_BATCH = "hasel_msgs/msg/SampleBatch"
+_STROKE = "hasel_msgs/msg/Stroke"
+
+
+def _messages(n: int, rng: np.random.Generator) -> list[tuple[int, bytes, int]]:
+    out = []
+    for i in range(n):
+        t = 10**9 + i * 5_000_000
+        if i % 2 == 0:
+            out.append((1, encode_sample_batch(t, 1e-4, rng.normal(size=50), rng.normal(size=50),
+                                               rng.normal(size=50)), t))
+        else:
+            out.append((2, encode(_STROKE, {"header": {"stamp": {"sec": t // 10**9, "nanosec": t % 10**9}},
+                                            "stroke_mm": float(rng.normal()), "source": 2}), t))
+    return out
+
+
+def writer_overhead(n_messages: int = 20000, compression_level: int = 3, repeats: int = 3) -> dict[str, Any]:
+    """CPU time per message, ours vs the bare mcap writer (best of ``repeats``).
+
+    Half the messages are 50-sample ``SampleBatch`` (three arrays), half ``Stroke``.
+
+    Returns
+    -------
+    dict
+        ``ours_us``, ``bare_us`` (per message), ``ratio`` and the same without
+        compression (``ours_none_us``, ``bare_none_us``, ``ratio_none``).
+    """
+    from mcap.writer import CompressionType, Writer
+
+    msgs = _messages(n_messages, np.random.default_rng(1))
+    defs = {name: message_definition(name).encode() for name in (_BATCH, _STROKE)}
+
+    def ours(path: Path, comp: str) -> float:
+        with Ros2McapWriter(path, compression=comp, compression_level=compression_level,
+                            max_chunk_span_s=None, fsync_interval_s=None) as w:
+            w.add_topic("/plant/batch", _BATCH)
+            w.add_topic("/sensor/stroke", _STROKE)
+            t0 = time.process_time()
+            for c, d, t in msgs:
+                w.write(c, d, t, t)
+            w.close()
+            return time.process_time() - t0
+
+    def bare(path: Path, comp: CompressionType) -> float:
+        w = Writer(str(path), chunk_size=DEFAULT_CHUNK_SIZE, compression=comp)
+        w.start("ros2", "bare")
+        s1 = w.register_schema(_BATCH, "ros2msg", defs[_BATCH])
+        s2 = w.register_schema(_STROKE, "ros2msg", defs[_STROKE])
+        w.register_channel("/plant/batch", "cdr", s1)
+        w.register_channel("/sensor/stroke", "cdr", s2)
+        t0 = time.process_time()
+        for c, d, t in msgs:
+            w.add_message(c, t, d, t)
+        w.finish()
+        return time.process_time() - t0
+
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        a = min(ours(d / "a.mcap", "zstd") for _ in range(repeats))
+        b = min(bare(d / "b.mcap", CompressionType.ZSTD) for _ in range(repeats))
+        an = min(ours(d / "c.mcap", "none") for _ in range(repeats))
+        bn = min(bare(d / "e.mcap", CompressionType.NONE) for _ in range(repeats))
+    n = len(msgs)
+    return {"messages": n, "compression_level": compression_level,
+            "ours_us": 1e6 * a / n, "bare_us": 1e6 * b / n, "ratio": a / b,
+            "ours_none_us": 1e6 * an / n, "bare_none_us": 1e6 * bn / n, "ratio_none": an / bn}
+
+
+def load_speed(segments: int = 18, segment_s: float = 60.0, rate_hz: float = 10_000.0, batch: int = 50,
+               repeats: int = 2) -> dict[str, Any]:
+    """Write a batched 10 kHz log and time :func:`load_signals` on two of its fields.
+
+    Returns
+    -------
+    dict
+        ``samples`` (per signal), ``file_mib``, ``write_s``, ``load_wall_s``,
+        ``load_cpu_s`` (best of ``repeats``) and ``samples_per_s`` (per signal, CPU time).
+    """
+    rng = np.random.default_rng(2)
+    n_msgs = int(round(segments * segment_s * rate_hz / batch))
+    period = 1.0 / rate_hz
+    step_ns = int(round(batch * period * 1e9))
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "campaign.mcap"
+        t0 = time.perf_counter()
+        with Ros2McapWriter(path, fsync_interval_s=None) as w:
+            c = w.add_topic("/plant/batch", _BATCH)
+            k = np.arange(batch)
+            for i in range(n_msgs):
+                v = 4.0 + np.sin(2e-3 * (k + i * batch)) + 0.01 * rng.standard_normal(batch)
+                y = 0.4 * v + 0.002 * rng.standard_normal(batch)
+                t = i * step_ns
+                w.write(c, encode_sample_batch(t, period, v, y, y, 100.0 + y, frame_id="plant"), t, t, i)
+        write_s = time.perf_counter() - t0
+        best_wall = best_cpu = float("inf")
+        n = 0
+        for _ in range(repeats):
+            w0, c0 = time.perf_counter(), time.process_time()
+            sig = load_signals(path, ["/plant/batch.voltage_kv", "/plant/batch.stroke_mm"])
+            best_wall = min(best_wall, time.perf_counter() - w0)
+            best_cpu = min(best_cpu, time.process_time() - c0)
+            n = int(sig["/plant/batch.voltage_kv"].values.size)
+            del sig
+        size = path.stat().st_size
+    return {"samples": n, "file_mib": size / 2**20, "write_s": write_s, "load_wall_s": best_wall,
+            "load_cpu_s": best_cpu, "samples_per_s": n / best_cpu}
