@@ -130,3 +130,17 @@ def test_bad_options_raise():
         identify(t, u, u, bandwidth=3)
     with pytest.raises(BadInputError, match="holdout_fraction"):
         identify(t, u, u, holdout_fraction=0.95)
+
+
+def test_operating_points_that_saturate_the_laser_are_left_out():
+    """At 7 kV +- 1 kV the stroke passes the laser ADC's 9.9 mm full scale: that point is set aside."""
+    sch, out, laser = _campaign([3.0, 7.0], seed=3)
+    assert np.max(out.stroke_mm) > 9.9 and np.max(laser) < 9.9
+    r = identify(sch.t_s, out.applied_kv, laser, input_name="voltage_kv", output_name="stroke_mm", order=(4, 5))
+    assert [round(p.mean_input) for p in r.points] == [3]
+    assert any("clipped" in s.reason and round(s.level) == 7 for s in r.skipped)
+    assert any("left out" in n for n in r.notes)
+    kept = identify(sch.t_s, out.applied_kv, laser, input_name="voltage_kv", output_name="stroke_mm", order=(4, 5),
+                    exclude_clipped=False)
+    assert [round(p.mean_input) for p in kept.points] == [3, 7]
+    assert kept.dependence.verdict == "dependent"

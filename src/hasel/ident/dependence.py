@@ -60,7 +60,9 @@ class DependenceTest:
         points, dB and degrees.
     spread_db, spread_deg : float
         95th percentile over the tested frequencies of the spread between the
-        operating points (largest minus smallest magnitude in dB, phase in degrees).
+        operating points (largest minus smallest magnitude in dB, phase in degrees),
+        over the frequencies where every estimate's relative error is below a quarter
+        of ``tol_db`` (all tested frequencies if fewer than three are).
     band_hz : (float, float)
         Lowest and highest tested frequency, Hz.
     n_points : int
@@ -174,8 +176,12 @@ def offset_dependence(responses: Sequence[FreqResp], *, coherence_min: float = 0
     dev_db = 20.0 * np.log10(np.abs(ratio))
     dev_deg = np.degrees(np.angle(ratio))
     max_db, max_deg = float(np.max(np.abs(dev_db))), float(np.max(np.abs(dev_deg)))
-    spread_db = float(np.percentile(np.ptp(dev_db, axis=0), 95))
-    spread_deg = float(np.percentile(np.ptp(dev_deg, axis=0), 95))
+    # the spread is judged where the estimates are precise enough to show a spread of the
+    # tolerance (relative error below a quarter of it), so noise does not pass for dependence
+    precise = np.all(S / np.abs(H) < 0.25 * (10 ** (tol_db / 20.0) - 1.0), axis=0)
+    cols = precise if np.count_nonzero(precise) >= 3 else np.ones(N, bool)
+    spread_db = float(np.percentile(np.ptp(dev_db[:, cols], axis=0), 95))
+    spread_deg = float(np.percentile(np.ptp(dev_deg[:, cols], axis=0), 95))
     per = [{"offset": offsets[k], "reduced_chi2": float(z2[k].sum() / (2 * N * (K - 1) / K)),
             "mean_dev_db": float(np.mean(dev_db[k])), "mean_dev_deg": float(np.mean(dev_deg[k]))}
            for k in range(K)]

@@ -88,6 +88,10 @@ class IdentOptions:
         Smallest relative uncertainty in the fit's weights.
     coherence_min, alpha, tol_db, tol_deg : float
         Settings of the operating-point dependence test.
+    exclude_clipped : bool
+        Leave out operating points whose output sits at its largest or smallest
+        value in 1 % or more of the samples (a saturated sensor, e.g. the laser's
+        ADC at full scale): clipping is not the plant's dynamics.
     """
 
     band_hz: tuple[float, float] | None = None
@@ -106,6 +110,7 @@ class IdentOptions:
     alpha: float = 0.01
     tol_db: float = 1.0
     tol_deg: float = 5.0
+    exclude_clipped: bool = True
 
 
 @dataclass(frozen=True)
@@ -249,9 +254,12 @@ class IdentResult:
             f"({', '.join(f'{p.mean_input:.3g}' for p in self.points)}{(' ' + self.input_unit) if self.input_unit else ''})",
             f"model order: {self.fit.nz} zeros / {self.fit.np} poles"
             + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else ""),
-            f"static gain G(0): {m.dc_gain:.4g} {self.gain_unit}; static map slope at the mean offset: "
-            f"{float(self.static_map.slope(np.mean(self.static_map.offsets))):.4g} {self.gain_unit} "
-            f"(degree {self.static_map.degree})",
+            f"static gain G(0): {m.dc_gain:.4g} {self.gain_unit}; " + (
+                f"static map slope at the mean offset: "
+                f"{float(self.static_map.slope(np.mean(self.static_map.offsets))):.4g} {self.gain_unit} "
+                f"(degree {self.static_map.degree})" if self.static_map.offsets.size > 1 else
+                f"static map: one point, {self.static_map.means[0]:.4g} {self.output_unit} at "
+                f"{self.static_map.offsets[0]:.4g} {self.input_unit}"),
             f"frequency-domain fit over {self.fit.band_hz[0]:.3g}-{self.fit.band_hz[1]:.3g} Hz: "
             f"{self.fit.fit_percent:.1f} %, rms {self.fit.rms_db:.2g} dB / {self.fit.rms_deg:.2g} deg",
         ]
@@ -403,17 +411,32 @@ def _uniform(t: np.ndarray, u: np.ndarray, y: np.ndarray, notes: list[str]) -> t
 
 def _refine_period(u: np.ndarray, approx_samples: float) -> float:
     """Period in samples near ``approx_samples`` with the best normalised correlation (whole samples)."""
-    x = u - np.mean(u)
     k0 = int(round(approx_samples))
+    # compare one window of at most a period with the same window k samples later
+    w = min(u.size - (k0 + 3), k0)
+    if w < 8:
+        return float(k0)
+    x = u[: w + k0 + 3] - np.mean(u[:w])
+    a = x[:w]
+    # einsum, not dot/@: no BLAS threads to wake for a long 1-D product (much faster on a busy machine)
+    ea = float(np.einsum("i,i->", a, a))
     best, best_k = -np.inf, k0
     for k in range(max(1, k0 - 3), k0 + 4):
-        if k >= x.size:
-            break
-        a, b = x[:-k], x[k:]
-        r = float(a @ b) / math.sqrt(float(a @ a) * float(b @ b) or 1.0)
+        b = x[k:k + w]
+        r = float(np.einsum("i,i->", a, b)) / math.sqrt(ea * float(np.einsum("i,i->", b, b)) or 1.0)
         if r > best:
             best, best_k = r, k
     return float(best_k)
+
+
+def _clipped_fraction(y: np.ndarray) -> tuple[float, float]:
+    """Largest fraction of samples sitting exactly at the maximum or the minimum, and that value."""
+    hi, lo = float(np.max(y)), float(np.min(y))
+    if hi == lo:
+        return 1.0, hi
+    f_hi = float(np.count_nonzero(y == hi)) / y.size
+    f_lo = float(np.count_nonzero(y == lo)) / y.size
+    return (f_hi, hi) if f_hi >= f_lo else (f_lo, lo)
 
 
 def _blocks(x: np.ndarray, m: int) -> np.ndarray:
@@ -498,6 +521,23 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     if not segs:
         raise BadInputError(f"no operating point with excitation found in {input_name} "
                             f"({len(skipped)} hold(s) or short piece(s) skipped)")
+    if opts.exclude_clipped:
+        kept = []
+        for s in segs:
+            frac, level = _clipped_fraction(yy[s.i0:s.i1])
+            if frac >= 0.01:
+                skipped.append(SkippedPart(s.start_s, s.end_s, s.offset,
+                                           f"{output_name} clipped at {level:.6g} in {100 * frac:.0f} % of the "
+                                           "samples (sensor range)"))
+                notes.append(f"operating point {s.offset:.4g} ({s.start_s:.4g}-{s.end_s:.4g} s) left out: "
+                             f"{output_name} sits at its extreme {level:.6g} in {100 * frac:.0f} % of the samples "
+                             "(saturated sensor or actuator)")
+            else:
+                kept.append(s)
+        if not kept:
+            raise BadInputError(f"{output_name} is clipped in every operating point (sensor range); nothing to "
+                                "identify from")
+        segs = kept
     lap("segments")
 
     # 2. band and analysis rate

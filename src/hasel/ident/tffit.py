@@ -459,7 +459,7 @@ def fit_tf(f_hz: np.ndarray, H: np.ndarray, *, sigma: np.ndarray | None = None,
         for nz in sorted(c[0] for c in cands if c[1] == n_p):
             if 2 * n_fit <= nz + 1 + n_p + int(delay):
                 continue
-            theta, cost = _fit(d_fit, nz, n_p, delay, min(max_nfev, 150))
+            theta, cost = _fit(d_fit, nz, n_p, delay, min(max_nfev, 60))
             r = _residual(theta, d_held, nz, n_p, delay)
             held_cost = float(np.sqrt(np.mean(r[: r.size // 2] ** 2 + r[r.size // 2:] ** 2)))
             scores.append(OrderScore(nz=nz, np=n_p, fit_cost=cost, heldout_cost=held_cost))

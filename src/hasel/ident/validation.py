@@ -36,8 +36,9 @@ def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
     y_hat = np.asarray(y_hat, float)
     if y.shape != y_hat.shape or y.ndim != 1 or y.size == 0:
         raise BadInputError(f"y and y_hat must be non-empty 1-D arrays of one length, got {y.shape}, {y_hat.shape}")
-    den = float(np.linalg.norm(y - y.mean()))
-    return float(np.linalg.norm(y - y_hat)) / den if den > 0 else float("inf")
+    d0, d1 = y - y.mean(), y - y_hat
+    den = float(np.sqrt(np.einsum("i,i->", d0, d0)))
+    return float(np.sqrt(np.einsum("i,i->", d1, d1))) / den if den > 0 else float("inf")
 
 
 def compare_fit(y: np.ndarray, y_hat: np.ndarray) -> float:
