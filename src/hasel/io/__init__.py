@@ -11,11 +11,12 @@
 Times: float seconds in the API, integer nanoseconds only in MCAP records
 (:mod:`hasel.io.timeconv`).
 """
-from hasel.io.cdr import CdrEncoder, CdrError, encode
+from hasel.io.cdr import CdrEncoder, CdrError, encode, encode_sample_batch
 from hasel.io.dataset import IOData, load_io
 from hasel.io.info import InfoReport, TopicStats, format_info, info
 from hasel.io.loader import (
-    Marker, MarkerSegment, Segment, Signal, TopicInfo, list_topics, load_markers, load_signals, marker_segments,
+    Marker, MarkerSegment, Segment, Signal, TopicInfo, list_topics, load_markers, load_signals,
+    load_signals_and_markers, marker_segments,
 )
 from hasel.io.msgdefs import MessageDefinitionError, message_definition, type_hash
 from hasel.io.salvage import SalvageReport, salvage
@@ -23,8 +24,8 @@ from hasel.io.writer import QosProfile, Ros2McapWriter, offered_qos_yaml
 
 __all__ = [
     "Ros2McapWriter", "QosProfile", "offered_qos_yaml", "message_definition", "type_hash",
-    "MessageDefinitionError", "CdrEncoder", "CdrError", "encode",
+    "MessageDefinitionError", "CdrEncoder", "CdrError", "encode", "encode_sample_batch",
     "Signal", "TopicInfo", "Marker", "Segment", "MarkerSegment", "list_topics", "load_signals", "load_markers",
-    "marker_segments", "IOData", "load_io", "InfoReport", "TopicStats", "info", "format_info",
+    "load_signals_and_markers", "marker_segments", "IOData", "load_io", "InfoReport", "TopicStats", "info", "format_info",
     "SalvageReport", "salvage",
 ]

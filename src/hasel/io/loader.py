@@ -31,7 +31,7 @@ from hasel.io.timeconv import NS_PER_S
 
 __all__ = [
     "Signal", "TopicInfo", "Marker", "Segment", "MarkerSegment", "list_topics", "split_field_spec",
-    "load_signals", "load_markers", "marker_segments", "MARKER_TYPE",
+    "load_signals", "load_markers", "load_signals_and_markers", "marker_segments", "fields_of", "MARKER_TYPE",
 ]
 
 MARKER_TYPE = "hasel_msgs/ExperimentMarker"
