@@ -175,11 +175,11 @@ def detect_period(u: np.ndarray, rate_hz: float, *, min_period_s: float | None =
     return (k + float(np.clip(frac, -0.5, 0.5))) / rate_hz
 
 
-def excited_band(u: np.ndarray, rate_hz: float, *, rel_level: float = 0.01) -> tuple[float, float]:
+def excited_band(u: np.ndarray, rate_hz: float, *, rel_level: float = 0.1) -> tuple[float, float]:
     """Band where the input (mean removed) carries power, Hz.
 
     The input's periodogram is smoothed over 1/8-octave bands; the band runs from the
-    lowest to the highest smoothed level within ``rel_level`` (-20 dB) of its
+    lowest to the highest smoothed level within ``rel_level`` (-10 dB) of its
     maximum.
 
     Parameters

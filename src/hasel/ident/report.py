@@ -69,11 +69,14 @@ def plot_bode(result: IdentResult, path: str | Path, *, paper: bool | None = Non
     fig, (am, ap) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     cmap = plt.get_cmap("viridis")
     n = len(result.points)
+    seen: set[str] = set()
     for i, pt in enumerate(result.points):
         fr = pt.fft if result.estimator == "periodic_fft" else pt.h1
         c = cmap(i / max(n - 1, 1))
         lo, hi = fr.bounds_db(2.0)
-        am.semilogx(fr.f_hz, fr.magnitude_db, ".", ms=2, color=c, label=_label(result, pt.mean_input))
+        label = _label(result, pt.mean_input)
+        am.semilogx(fr.f_hz, fr.magnitude_db, ".", ms=2, color=c, label=None if label in seen else label)
+        seen.add(label)
         ok = np.isfinite(lo) & np.isfinite(hi)
         am.fill_between(fr.f_hz[ok], lo[ok], hi[ok], color=c, alpha=0.15, lw=0)
         ph = np.degrees(np.angle(fr.H))
@@ -101,7 +104,7 @@ def plot_bode(result: IdentResult, path: str | Path, *, paper: bool | None = Non
     ap.grid(True, which="both", alpha=0.3)
     am.legend(fontsize=7, ncol=2, loc="lower left")
     method = "FFT ratio over whole periods" if result.estimator == "periodic_fft" else "Welch H1"
-    am.set_title(f"{result.output_name} / {result.input_name}: {method}, 2-sigma bands")
+    am.set_title(f"{result.output_name} / {result.input_name}: {method}, 2-sigma bands", fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
 

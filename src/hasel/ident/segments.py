@@ -221,9 +221,28 @@ def find_segments(t_s: np.ndarray, u: np.ndarray, *, window_s: float | None = No
                 pieces[i:i + 2] = [(pieces[i][0], pieces[i + 1][1])]
                 merged = True
                 break
+    min_dur = 4.0 * window_s if min_duration_s is None else finite("min_duration_s", min_duration_s)
+    # a short piece next to a long excited one, within that one's swing, is its slow start or
+    # end (a sweep from a very low frequency), not an operating point of its own
+    merged = True
+    while merged and len(pieces) > 1:
+        merged = False
+        info = [stats(p0, p1) for p0, p1 in pieces]
+        long_ = [(p1 - p0) * block_s >= min_dur for p0, p1 in pieces]
+        for i in range(len(pieces)):
+            if long_[i]:
+                continue
+            for j in (i + 1, i - 1):
+                if 0 <= j < len(pieces) and long_[j] and info[j][1] > 0 and \
+                        abs(info[i][0] - info[j][0]) <= 2.0 * info[j][1] and info[i][1] > 0.1 * info[j][1]:
+                    a, b = sorted((i, j))
+                    pieces[a:b + 1] = [(pieces[a][0], pieces[b][1])]
+                    merged = True
+                    break
+            if merged:
+                break
     info = [stats(p0, p1) for p0, p1 in pieces]
     rms_max = max((r for _, r in info), default=0.0)
-    min_dur = 4.0 * window_s if min_duration_s is None else finite("min_duration_s", min_duration_s)
     margin = 2 if len(pieces) > 1 else 0
     segments: list[Segment] = []
     skipped: list[SkippedPart] = []
