@@ -46,12 +46,12 @@ class HvAmplifierNode(Node):
         self.output_kv = 0.0
         self.last_reason = Reason.NONE
         self.tripped = False
-        self.applied_pub = self.create_publisher(VoltageCommand, "/amp/applied", topic_qos("/amp/applied"))
-        self.batch_pub = self.create_publisher(SampleBatch, "/amp/applied_batch", topic_qos("/amp/applied_batch"))
+        self.applied_pub = self.create_publisher(VoltageCommand, "amp/applied", topic_qos("/amp/applied"))
+        self.batch_pub = self.create_publisher(SampleBatch, "amp/applied_batch", topic_qos("/amp/applied_batch"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
-        self.create_subscription(VoltageCommand, "/amp/command", self.on_command, topic_qos("/amp/command"))
-        self.create_subscription(SampleBatch, "/amp/command_batch", self.on_batch, topic_qos("/amp/command_batch"))
-        self.create_subscription(VoltageCommand, "/amp/precondition", self.on_precondition,
+        self.create_subscription(VoltageCommand, "amp/command", self.on_command, topic_qos("/amp/command"))
+        self.create_subscription(SampleBatch, "amp/command_batch", self.on_batch, topic_qos("/amp/command_batch"))
+        self.create_subscription(VoltageCommand, "amp/precondition", self.on_precondition,
                                  topic_qos("/amp/precondition"))
         self.create_timer(self.period_s, self.on_watchdog)
 

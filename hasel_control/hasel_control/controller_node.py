@@ -38,7 +38,7 @@ from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
 
 __all__ = ["PidControllerNode", "main", "FEEDBACK_TOPICS"]
 
-FEEDBACK_TOPICS = {"laser": "/laser/stroke", "strain": "/strain/stroke_filtered"}
+FEEDBACK_TOPICS = {"laser": "laser/stroke", "strain": "strain/stroke_filtered"}
 _GAIN_PARAMS = ("kp_plus", "ki_plus", "kd_plus", "kp_minus", "ki_minus", "kd_minus")
 
 
@@ -75,13 +75,13 @@ class PidControllerNode(Node):
         self.last_feedback_s: float | None = None
         self.stale = False
         self.rejected = 0
-        self.cmd_pub = self.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
-        self.state_pub = self.create_publisher(ControllerState, "/controller/state", topic_qos("/controller/state"))
+        self.cmd_pub = self.create_publisher(VoltageCommand, "amp/command", topic_qos("/amp/command"))
+        self.state_pub = self.create_publisher(ControllerState, "controller/state", topic_qos("/controller/state"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
         fb_topic = declare(self, "feedback_topic", "", "override of the feedback topic ('' = from feedback)",
                            read_only=True) or FEEDBACK_TOPICS[self.feedback]
-        self.create_subscription(Stroke, fb_topic, self.on_feedback, topic_qos(FEEDBACK_TOPICS[self.feedback]))
-        self.create_subscription(Reference, "/reference", self.on_reference, topic_qos("/reference"))
+        self.create_subscription(Stroke, fb_topic, self.on_feedback, topic_qos("/" + FEEDBACK_TOPICS[self.feedback]))
+        self.create_subscription(Reference, "reference", self.on_reference, topic_qos("/reference"))
         self.create_timer(period, self.on_watch)  # staleness check, on the ROS (maybe simulated) clock
 
     def _config(self, g: dict, period: float, v_min: float, v_max: float, aw: str) -> DualModeConfig:

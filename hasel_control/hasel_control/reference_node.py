@@ -32,7 +32,7 @@ class ReferenceNode(Node):
         if not self.sequence or not all(math.isfinite(x) for x in self.sequence):
             raise BadInputError(f"sequence_mm must be a non-empty list of finite numbers, got {self.sequence}")
         self.start_s = start if start >= 0 else self.get_clock().now().nanoseconds * 1e-9
-        self.pub = self.create_publisher(Reference, "/reference", topic_qos("/reference"))
+        self.pub = self.create_publisher(Reference, "reference", topic_qos("/reference"))
         for i, r in enumerate(self.sequence):
             msg = Reference(stroke_mm=r)
             msg.header.stamp = to_stamp(self.start_s + i * self.hold_s)

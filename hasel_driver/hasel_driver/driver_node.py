@@ -30,8 +30,8 @@ class StrainDriverNode(Node):
         self.calibration_file = declare(self, "calibration_file", "", "YAML from `hasel calibrate` ('' = use slope/offset)")
         slope = declare(self, "slope_mm_per_us", ideal.slope_mm_per_us, "calibration slope, mm/us", lo=-100.0, hi=100.0)
         offset = declare(self, "offset_mm", ideal.offset_mm, "calibration offset, mm", lo=-1e4, hi=1e4)
-        in_topic = declare(self, "input_topic", "/sensor/timing", "raw 555 timing topic")
-        out_topic = declare(self, "output_topic", "/strain/stroke", "calibrated stroke topic")
+        in_topic = declare(self, "input_topic", "sensor/timing", "raw 555 timing topic")
+        out_topic = declare(self, "output_topic", "strain/stroke", "calibrated stroke topic")
         self.calibration = (Calibration.from_yaml(self.calibration_file) if self.calibration_file
                             else Calibration.line(slope, offset, "parameters"))
         self.add_on_set_parameters_callback(validate_with(self._check))

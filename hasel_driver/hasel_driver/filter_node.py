@@ -31,8 +31,8 @@ class LowPassNode(Node):
                          read_only=True)
         rate = declare(self, "rate_hz", 1.0 / paper.LOOP_PERIOD_S, "sample rate of the input, Hz", lo=1.0,
                        hi=10000.0, read_only=True)
-        in_topic = declare(self, "input_topic", "/strain/stroke", "stroke to filter")
-        out_topic = declare(self, "output_topic", "/strain/stroke_filtered", "filtered stroke")
+        in_topic = declare(self, "input_topic", "strain/stroke", "stroke to filter")
+        out_topic = declare(self, "output_topic", "strain/stroke_filtered", "filtered stroke")
         self.filter = LowPass(cutoff, rate)
         self.pub = self.create_publisher(Stroke, out_topic, topic_qos("/strain/stroke_filtered"))
         self.sub = self.create_subscription(Stroke, in_topic, self.on_stroke, topic_qos("/strain/stroke"))

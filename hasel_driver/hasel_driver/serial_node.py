@@ -54,10 +54,10 @@ class SerialBridgeNode(Node):
         self.last_rx = time.monotonic()
         self.link_ok = True
         self.rx_frames = 0
-        self.timing_pub = self.create_publisher(SensorTiming, "/sensor/timing", topic_qos("/sensor/timing"))
-        self.laser_pub = self.create_publisher(Stroke, "/laser/stroke", topic_qos("/laser/stroke"))
+        self.timing_pub = self.create_publisher(SensorTiming, "sensor/timing", topic_qos("/sensor/timing"))
+        self.laser_pub = self.create_publisher(Stroke, "laser/stroke", topic_qos("/laser/stroke"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
-        self.create_subscription(VoltageCommand, "/amp/applied", self.on_applied, topic_qos("/amp/applied"))
+        self.create_subscription(VoltageCommand, "amp/applied", self.on_applied, topic_qos("/amp/applied"))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(min(self.period_s / 5, 0.001), self.on_poll, clock=steady)  # read often: low latency
         self.create_timer(self.period_s, self.on_heartbeat, clock=steady)

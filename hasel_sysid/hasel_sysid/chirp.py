@@ -49,9 +49,9 @@ class ExperimentNode(Node):
             if r.kind == "precondition":
                 a, b = (int(round(x / period_s)) for x in (r.start_s, r.end_s))
                 self.pre[a:b] = True
-        self.batch_pub = self.create_publisher(SampleBatch, "/amp/command_batch", topic_qos("/amp/command_batch"))
-        self.pre_pub = self.create_publisher(VoltageCommand, "/amp/precondition", topic_qos("/amp/precondition"))
-        self.marker_pub = self.create_publisher(ExperimentMarker, "/markers", topic_qos("/markers"))
+        self.batch_pub = self.create_publisher(SampleBatch, "amp/command_batch", topic_qos("/amp/command_batch"))
+        self.pre_pub = self.create_publisher(VoltageCommand, "amp/precondition", topic_qos("/amp/precondition"))
+        self.marker_pub = self.create_publisher(ExperimentMarker, "markers", topic_qos("/markers"))
         self.create_subscription(ClockMsg, "/clock", self.on_clock, topic_qos("/clock"))
         self.last_tick = -1
 

@@ -79,11 +79,11 @@ class Collector(Node):
         self.applied: list[tuple[float, float, float, int]] = []
         self.states: list[ControllerState] = []
         self.filtered: list[tuple[float, float]] = []
-        self.create_subscription(SampleBatch, "/plant/batch", self.batches.append, topic_qos("/plant/batch"))
-        self.create_subscription(VoltageCommand, "/amp/applied", self._on_applied, topic_qos("/amp/applied"))
-        self.create_subscription(ControllerState, "/controller/state", self.states.append,
+        self.create_subscription(SampleBatch, "plant/batch", self.batches.append, topic_qos("/plant/batch"))
+        self.create_subscription(VoltageCommand, "amp/applied", self._on_applied, topic_qos("/amp/applied"))
+        self.create_subscription(ControllerState, "controller/state", self.states.append,
                                  topic_qos("/controller/state"))
-        self.create_subscription(Stroke, "/strain/stroke_filtered",
+        self.create_subscription(Stroke, "strain/stroke_filtered",
                                  lambda m: self.filtered.append((from_stamp(m.header.stamp), m.stroke_mm)),
                                  topic_qos("/strain/stroke_filtered"))
 

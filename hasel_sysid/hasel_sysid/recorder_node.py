@@ -64,19 +64,24 @@ class RecorderNode(Node):
     def _record(self, name: str, type_name: str, profile: QoSProfile, offered=None) -> None:
         if name in self._subs:
             return
-        cid = self.writer.add_topic(name, type_name, qos=offered or _qos_record(profile))
         msg_type = message_class(type_name)
+        # the graph's topics are relative (a namespaced graph records its own); /clock and
+        # /diagnostics stay global
+        sub_name = name if name in ("/clock", "/diagnostics") or name not in TOPICS else name.lstrip("/")
         self.counts[name] = 0
         clock = self.get_clock()
         write = self.writer.write
+        cid_box: list[int] = []
 
-        def on_message(data: bytes, info=None, _cid=cid, _name=name) -> None:
+        def on_message(data: bytes, info=None, _name=name) -> None:
             now = clock.now().nanoseconds
             pub = info.get("source_timestamp", now) if isinstance(info, dict) else now
-            write(_cid, data, now, pub or now)
+            write(cid_box[0], data, now, pub or now)
             self.counts[_name] += 1
 
-        self._subs[name] = self.create_subscription(msg_type, name, on_message, profile, raw=True)
+        sub = self.create_subscription(msg_type, sub_name, on_message, profile, raw=True)
+        cid_box.append(self.writer.add_topic(sub.topic_name, type_name, qos=offered or _qos_record(profile)))
+        self._subs[name] = sub
 
     def _discover(self) -> None:
         """Subscribe to topics that appeared (all, or the requested ones not yet seen)."""

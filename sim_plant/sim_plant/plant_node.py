@@ -95,11 +95,11 @@ class PlantNode(Node):
 
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
             if self.clock_mode == "sim" else None
-        self.timing_pub = self.create_publisher(SensorTiming, "/sensor/timing", topic_qos("/sensor/timing"))
-        self.laser_pub = self.create_publisher(Stroke, "/laser/stroke", topic_qos("/laser/stroke"))
-        self.batch_pub = self.create_publisher(SampleBatch, "/plant/batch", topic_qos("/plant/batch"))
-        self.create_subscription(VoltageCommand, "/amp/applied", self.on_applied, topic_qos("/amp/applied"))
-        self.create_subscription(SampleBatch, "/amp/applied_batch", self.on_applied_batch,
+        self.timing_pub = self.create_publisher(SensorTiming, "sensor/timing", topic_qos("/sensor/timing"))
+        self.laser_pub = self.create_publisher(Stroke, "laser/stroke", topic_qos("/laser/stroke"))
+        self.batch_pub = self.create_publisher(SampleBatch, "plant/batch", topic_qos("/plant/batch"))
+        self.create_subscription(VoltageCommand, "amp/applied", self.on_applied, topic_qos("/amp/applied"))
+        self.create_subscription(SampleBatch, "amp/applied_batch", self.on_applied_batch,
                                  topic_qos("/amp/applied_batch"))
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self.clock_mode == "wall":
