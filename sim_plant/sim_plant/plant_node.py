@@ -92,6 +92,11 @@ class PlantNode(Node):
         self.sequence = 0
         self._last_progress = time.monotonic()
         self._waiters: list[tuple[float, object]] = []
+        self.latencies_ns: list[int] = []  # wall mode: sensor stamp -> amplifier output, ns
+        self.missed_periods = 0
+        self.ticks = 0
+        self._wall_tick_ns: int | None = None
+        self._answered = True
 
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
             if self.clock_mode == "sim" else None
@@ -168,6 +173,10 @@ class PlantNode(Node):
             (command if math.isfinite(command) else 0.0)
         if self.clock_mode == "wall":
             self.command = cmd
+            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            if ns == self._wall_tick_ns:  # the answer to the latest tick: loop latency
+                self.latencies_ns.append(self.get_clock().now().nanoseconds - ns)
+                self._answered = True
             return
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if not self.running or self.done or ns != self.tick_stamp_ns():
@@ -200,11 +209,21 @@ class PlantNode(Node):
 
     # -- wall mode ----------------------------------------------------------------------
     def on_wall_tick(self) -> None:
-        """Real-time mode: step with the latest command, stamp with the node's clock."""
+        """Real-time mode: step with the latest command, stamp with the node's clock.
+
+        Also measures the loop: the latency from a tick's sensor stamp to the arrival of
+        the amplifier output carrying that stamp, and the periods whose output did not
+        arrive before the next tick (missed periods).
+        """
+        if self._wall_tick_ns is not None and not self._answered:
+            self.missed_periods += 1
         block = self.sim.step(self.command)
         if self.publish_batch:
             self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
-        self._publish_tick(self.get_clock().now().nanoseconds)
+        now = self.get_clock().now().nanoseconds
+        self._wall_tick_ns, self._answered = now, False
+        self.ticks += 1
+        self._publish_tick(now)
 
     # -- publishing ---------------------------------------------------------------------
     def _publish_batch(self, block: PlantBlock, t0_ns: int | None = None) -> None:

@@ -115,6 +115,8 @@ COMMANDS: list[Command] = [
             _calibrate_args, "hasel_sysid.calibrate:run", True),
     Command("chirp", "the paper's identification experiment (chirps on DC offsets), recorded to MCAP",
             "hasel_sysid.chirp:add_arguments", "hasel_sysid.chirp:run", True),
+    Command("bench", "the benchmarks that `make bench` runs: one table of ratios, and JSON",
+            "hasel_sysid.bench:add_arguments", "hasel_sysid.bench:run", True),
     Command("record", "record topics of the running graph to an MCAP file (rosbag2 layout)",
             _record_args, "hasel_sysid.replay:run_record", True),
     Command("replay", "publish a recorded MCAP file back into the graph", _replay_args,
