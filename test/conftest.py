@@ -15,6 +15,9 @@ matplotlib.use("Agg")
 os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("RCUTILS_LOGGING_MIN_SEVERITY", "WARN")
+# the workspace environment is already in place (rclpy imported below): CLI calls made
+# in-process must not re-execute the test process to set it up
+os.environ["HASEL_ROS_ENV_READY"] = "1"
 
 import pytest  # noqa: E402
 

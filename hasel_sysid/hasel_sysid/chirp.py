@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -107,8 +108,9 @@ def run_chirp(schedule: Schedule, out: str, *, seed: int = 0, plant: str = "nomi
     with NodeGraph(cfg, extra_nodes=[make_experiment, recorder_factory(out)]) as g:
         holder[0].publish_markers(excitation, amplitude_kv, f0, f1, duration)
         prog = None if quiet else Progress(total, f"chirp ({excitation})")
+        t0 = time.monotonic()
         g.run(total, progress=prog)
-        wall = prog.done() if prog is not None else None
+        wall = prog.done() if prog is not None else time.monotonic() - t0
     return {"file": out, "simulated_s": total, "wall_s": wall, "segments": len(schedule.markers())}
 
 

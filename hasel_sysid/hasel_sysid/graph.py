@@ -68,6 +68,7 @@ class GraphConfig:
     with_reference: bool = True
     with_controller: bool = True
     executor: str = "events"
+    domain_id: int | None = None  # None: a private domain claimed for this process
 
 
 class Collector(Node):
@@ -109,7 +110,11 @@ class NodeGraph:
                  quiet: bool = True):
         self.config = cfg = config or GraphConfig()
         self.context = Context()
-        rclpy.init(context=self.context)
+        # a private domain: nothing outside this job can reach into the graph, or hear it
+        from hasel.rosenv import private_domain
+
+        self.domain_id = private_domain() if cfg.domain_id is None else cfg.domain_id
+        rclpy.init(context=self.context, domain_id=self.domain_id)
         sim = [Parameter("use_sim_time", value=True)]
 
         def params(d: dict) -> list[Parameter]:

@@ -13,7 +13,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["workspace_root", "install_space", "ros_environment", "ensure_ros_environment",
+__all__ = ["workspace_root", "install_space", "ros_environment", "ensure_ros_environment", "private_domain",
            "DEFAULT_DOMAIN_ID"]
 
 #: The domain ``hasel`` uses when ROS_DOMAIN_ID is unset (valid range 0-101 on Linux).
@@ -80,3 +80,40 @@ def ensure_ros_environment() -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
+
+
+_DOMAIN_LOCKS: dict[int, object] = {}
+
+
+def private_domain(first: int = 110, last: int = 200) -> int:
+    """A ROS domain id no other running ``hasel`` job holds, for self-contained graphs.
+
+    A job whose nodes all live in its own process (steps, calibrate, chirp, demo,
+    bench) has no reason to share a domain with anything: on a private one, two jobs
+    on one machine (or a job and a user's own nodes on the default domain) can never
+    exchange messages by accident. Ids are claimed with an advisory lock file (released
+    when the process ends); ``HASEL_DOMAIN_ID`` overrides. The range 110-200 is above
+    the ids people usually pick and still below Fast DDS's port limit (232).
+    """
+    import fcntl
+    import tempfile
+
+    env = os.environ.get("HASEL_DOMAIN_ID")
+    if env:
+        return int(env)
+    lock_dir = Path(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()) / "hasel-domains"
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    start = first + os.getpid() % (last - first + 1)
+    for i in range(last - first + 1):
+        dom = first + (start - first + i) % (last - first + 1)
+        if dom in _DOMAIN_LOCKS:
+            return dom
+        f = open(lock_dir / f"{dom}.lock", "w")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue
+        _DOMAIN_LOCKS[dom] = f
+        return dom
+    raise RuntimeError(f"no free ROS domain id in {first}-{last}")
