@@ -122,3 +122,13 @@ def test_unsafe_parameters_are_rejected_with_the_reason(harness):
     assert ok[0].successful
     assert harness.send(8.0).applied_kv == 6.0
     harness.amp.set_parameters([Parameter("v_max_kv", value=9.0)])
+
+
+def test_shutdown_commands_zero_kv(harness):
+    harness.send(6.0)
+    harness.amp.on_shutdown()
+    for _ in range(200):
+        harness.ex.spin_once(timeout_sec=0.01)
+        if harness.got[-1].reason == VoltageCommand.REASON_SHUTDOWN:
+            break
+    assert harness.got[-1].applied_kv == 0.0 and harness.got[-1].reason == VoltageCommand.REASON_SHUTDOWN

@@ -84,3 +84,45 @@ def test_replaying_raw_timing_through_driver_and_filter_reproduces_the_filtered_
     got = {(m.header.stamp.sec, m.header.stamp.nanosec): m.stroke_mm for m in out}
     for w in want:  # exactly the same numbers, stamp by stamp
         assert got[(w.header.stamp.sec, w.header.stamp.nanosec)] == w.stroke_mm
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_hasel_record_stopped_by_a_signal_leaves_a_complete_file(tmp_path, sig):
+    import os
+    import signal
+    import subprocess
+    import time
+    from pathlib import Path
+
+    from hasel_msgs.msg import Reference
+
+    out = tmp_path / "rec.mcap"
+    hasel = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "hasel"
+    proc = subprocess.Popen([str(hasel), "record", "-o", str(out), "--topics", "/sig_test"], env=dict(os.environ),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("sig_pub", context=ctx)
+    pub = node.create_publisher(Reference, "/sig_test", 10)
+    try:
+        deadline = time.monotonic() + 30
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert pub.get_subscription_count() == 1, "the recorder did not subscribe"
+        for i in range(100):
+            pub.publish(Reference(stroke_mm=float(i)))
+            time.sleep(0.002)
+        time.sleep(0.5)
+        proc.send_signal(getattr(signal, sig))
+        stdout, stderr = proc.communicate(timeout=30)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, stderr
+    assert "Traceback" not in stderr
+    with out.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()  # present: the footer and summary were written
+        values = [m.stroke_mm for _, ch, _, m in reader.iter_decoded_messages() if ch.topic == "/sig_test"]
+    assert summary is not None
+    assert values == [float(i) for i in range(100)]

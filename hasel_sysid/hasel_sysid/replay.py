@@ -10,7 +10,6 @@ drops nothing.
 from __future__ import annotations
 
 import argparse
-import signal
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -159,7 +158,8 @@ def run_record(args: argparse.Namespace) -> int:
     node = RecorderNode(str(out), topics)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    # rclpy's own handlers turn SIGINT and SIGTERM into a context shutdown, which ends
+    # the spin below with ExternalShutdownException; the file is then closed in finally
     end = None if args.duration is None else time.monotonic() + args.duration
     try:
         while end is None or time.monotonic() < end:
