@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -33,27 +33,19 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hasel import paper
 from hasel.errors import BadInputError
-from hasel.plant import Actuator, NominalActuator
+from hasel import plantspec
+from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
 from hasel_driver.rosutil import declare, run_node, topic_qos
 from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
-__all__ = ["PlantNode", "main", "VARIANTS", "make_actuator"]
+__all__ = ["PlantNode", "main", "make_actuator"]
 
-#: Plant variants: name -> factory(node parameters) -> Actuator. Later variants add effects.
-VARIANTS: dict[str, Callable[[dict], Actuator]] = {
-    "nominal": lambda params: NominalActuator(),
-}
-
-
-def make_actuator(variant: str, params: dict | None = None) -> Actuator:
-    """The actuator model of a variant name (BadInputError lists the known ones)."""
-    try:
-        factory = VARIANTS[variant]
-    except KeyError:
-        raise BadInputError(f"unknown plant variant {variant!r}; known: {', '.join(sorted(VARIANTS))}") from None
-    return factory(params or {})
+def make_actuator(variant: str) -> Actuator:
+    """The actuator model of a variant: ``nominal``, ``truth``, or ``truth:EFFECT(p=v)+...``
+    (see :mod:`hasel.plantspec`); BadInputError explains a bad one."""
+    return plantspec.make_actuator(variant)
 
 
 class PlantNode(Node):
@@ -64,7 +56,9 @@ class PlantNode(Node):
         self.clock_mode = declare(self, "clock_mode", "sim", "sim (publish /clock, lockstep) | wall", read_only=True)
         if self.clock_mode not in ("sim", "wall"):
             raise BadInputError(f"clock_mode must be 'sim' or 'wall', got {self.clock_mode!r}")
-        variant = declare(self, "variant", "nominal", "plant model variant", read_only=True)
+        variant = declare(self, "variant", "nominal",
+                          "plant model: nominal | truth | truth:EFFECT(param=value)+... (unmodelled effects)",
+                          read_only=True)
         seed = declare(self, "seed", 0, "seed of the sensor noise", lo=0, hi=2**31 - 1, read_only=True)
         period = declare(self, "period_s", paper.LOOP_PERIOD_S, "loop period, s", lo=1e-4, hi=1.0, read_only=True)
         laser_noise = declare(self, "laser_noise_mm", LaserConfig().noise_mm, "laser noise (std), mm",
@@ -80,9 +74,11 @@ class PlantNode(Node):
                                  lo=-1.0, hi=1e9)
         autostart = declare(self, "autostart", True, "start stepping by itself (sim mode)")
         self.publish_batch = declare(self, "publish_batch", True, "publish the 10 kHz samples")
-        self.sim = PlantSimulator(actuator or make_actuator(variant), period_s=period, seed=seed,
-                                  laser=LaserConfig(noise_mm=laser_noise),
-                                  strain=StrainConfig(noise_us=strain_noise, noise_us_per_kv=strain_noise_kv))
+        act = actuator or make_actuator(variant)
+        self.sim = PlantSimulator(act, period_s=period, seed=seed, laser=LaserConfig(noise_mm=laser_noise),
+                                  strain=StrainConfig(noise_us=strain_noise, noise_us_per_kv=strain_noise_kv),
+                                  strain_curve=getattr(act, "strain_curve", None))
+        self.get_logger().info(f"plant: {plantspec.describe(act)}")
         self.period_ns = int(round(period * 1e9))
         self.trigger_period_us = 1e6 / self.sim.strain.config.trigger_hz
         self.command: float | np.ndarray = 0.0
