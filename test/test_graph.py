@@ -68,3 +68,28 @@ def test_watchdog_drives_zero_kv_within_three_periods_when_controller_stops():
     assert zero[0] - t_stop <= 3 * 0.005 + 0.005 + 1e-9  # stale after 3 periods, acted at the next tick
     # the actuator's voltage decays to zero once the watchdog acts
     assert all(kv == 0.0 for t, kv, _ in after if t >= zero[0])
+
+
+def test_laser_loop_matches_an_independent_python_control_model():
+    """The paper's loop on P(s), built independently with python-control (discrete C+
+    by the paper's rules, ZOH plant, no amplifier filter, no noise), against the graph."""
+    import control as ct
+    from scipy import signal
+
+    from hasel import paper
+    from hasel.metrics import step_metrics
+
+    num, den = paper.plant_tf()
+    ts = 0.005
+    kp, ki, kd = paper.C_PLUS
+    c = ct.tf([kp], [1], ts) + ct.tf([ki * ts / 2, ki * ts / 2], [1, -1], ts) + ct.tf([kd / ts, -kd / ts], [1, 0], ts)
+    pd = ct.c2d(ct.tf(num, den), ts, "zoh")
+    t = np.arange(0, 1, ts)
+    u = ct.step_response(ct.feedback(c, pd), t)[1]
+    tf = np.arange(0, 1, 1e-4)
+    _, y, _ = signal.lsim((num, den), 2 * np.repeat(u, 50)[:tf.size], tf, interp=False)
+    ref = step_metrics(tf, 2 + y, 0.0, 1.0, 2.0, 4.0)
+    ours = run_steps("laser", [2.0, 4.0], 1.0, quiet=True)["steps"][0]
+    assert ours["rise_s"] == pytest.approx(ref.rise_s, rel=0.05)
+    assert ours["settling_s"] == pytest.approx(ref.settling_s, rel=0.1)
+    assert ours["overshoot_pct"] == pytest.approx(ref.overshoot_pct, abs=1.5)
