@@ -4,7 +4,7 @@ VENV := .venv
 HASEL := $(VENV)/bin/hasel
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench clean core-without-ros
 
 setup:
 	@bash tools/setup.sh
@@ -12,8 +12,12 @@ setup:
 demo: setup
 	$(HASEL) demo
 
-test: setup
+test: setup core-without-ros
 	$(HASEL) env -- $(VENV)/bin/python -m pytest -q $(PYTEST_ARGS) src/tests test
+
+# The core library in a venv that has no ros-* package at all: it must import and run.
+core-without-ros:
+	@bash tools/check_core_without_ros.sh
 
 bench: setup
 	$(HASEL) bench
