@@ -1,0 +1,668 @@
+"""Generic parametric augmentations of a nominal linear simulator, one per effect name.
+
+None of them knows how a particular simulator or rig produces its effect: each is
+the simplest generic form that has the effect's *signature*, fitted to the data.
+
+=================== ======================= =========================================
+name                slot in the chain       form (x input, y output, G the model)
+=================== ======================= =========================================
+time_delay          input                   x(t - d)
+saturation          input or output         clip at a lower or an upper limit
+static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (degree 5),
+                                            or (internal, a stiffness-like force)
+                                            ``y + G1(s sum_j b_j w^j)``
+                                            ``G1 = G / G(0)``, ``z``, ``w`` the
+                                            normalised input and output
+hysteresis          input                   Prandtl-Ishlinskii:
+                                            ``x + sum_j w_j (play_rj(x) - x)``,
+                                            ``w_j >= 0``, five fixed thresholds
+load_mass           model                   inertia of G's resonances (or its slowest
+                                            real pole) times ``1 + mu``, gain ``kappa``
+asymmetric_dynamics output                  first-order lag, one time constant while
+                                            the output rises, another while it falls
+                                            (log-linear in the level)
+charge_drift        output                  ``y (1 + g q) + s o q``, ``q`` a slow
+                                            (``tau``) low-pass of the input's history
+sensor_nonlinearity output (last)           ``y + s sum_j c_j w^j`` (degree 5)
+=================== ======================= =========================================
+
+The chain order is: delay, input saturation, input map, hysteresis, G (with load),
+internal map, asymmetric lag, drift, output saturation, sensor map.
+:class:`Pipeline` simulates any combination with caching of the unchanged upstream
+stages; :func:`fit_family` fits one family's few parameters on the training samples
+with the others held fixed (linear least squares where the form is linear in its
+parameters, a small grid plus bounded refinement otherwise).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, signal
+
+from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s
+from hasel.effects.operators import asymmetric_lag, play, scale_resonances
+
+__all__ = ["EffectFit", "Pipeline", "fit_family", "joint_refine", "family_bounds", "FAMILIES", "HYST_THRESHOLDS",
+           "describe_params"]
+
+#: Effect names in chain order of their (first) slot.
+FAMILIES = ("time_delay", "saturation", "static_nonlinearity", "hysteresis", "load_mass",
+            "asymmetric_dynamics", "charge_drift", "sensor_nonlinearity")
+#: Degree of the static map's polynomial (offset and linear terms included).
+STATIC_DEGREE = 5
+#: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
+HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
+# stages whose presence downstream keeps a least-squares basis exact
+_LINEAR_STAGES = {"time_delay", "load_mass"}
+_SLOT = {"time_delay": 0, "saturation:input": 1, "static_nonlinearity:input": 2, "hysteresis": 3,
+         "load_mass": 4, "static_nonlinearity:internal": 5, "asymmetric_dynamics": 6, "charge_drift": 7,
+         "saturation:output": 8, "sensor_nonlinearity": 9}
+
+
+@dataclass(frozen=True)
+class EffectFit:
+    """One fitted augmentation.
+
+    Attributes
+    ----------
+    name : str
+        Effect name.
+    variant : str
+        Where or how it acts (e.g. ``"input"``/``"internal"``, ``"output:upper"``).
+    theta : tuple of float
+        Parameters in the family's internal order.
+    """
+
+    name: str
+    variant: str
+    theta: tuple[float, ...]
+
+    @property
+    def n_params(self) -> int:
+        """Number of fitted parameters (what the penalty counts)."""
+        return len(self.theta)
+
+    @property
+    def slot(self) -> int:
+        """Position in the chain."""
+        key = f"{self.name}:{self.variant.split(':')[0]}"
+        return _SLOT.get(key, _SLOT.get(self.name, 0))
+
+
+@dataclass
+class Pipeline:
+    """The nominal model plus augmentations, simulated on the prepared records.
+
+    Parameters
+    ----------
+    prep : Prepared
+        Working-rate data.
+    num, den : ndarray
+        Nominal model (descending powers of s).
+    """
+
+    prep: Prepared
+    num: np.ndarray
+    den: np.ndarray
+    _cache: dict = field(default_factory=dict)
+    _lin: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.num = np.asarray(self.num, float)
+        self.den = np.asarray(self.den, float)
+        self.nominal = LinearSim(self.num, self.den, self.prep.rate_hz)
+        self.t_dom = min(dominant_time_constant_s(self.den), self.span_s)
+        u = self.prep.stacked("u")
+        lo, hi = np.percentile(u, [1, 99])
+        self.u_c = 0.5 * (lo + hi)
+        self.u_s = max(0.5 * (hi - lo), 1e-12 * max(1.0, abs(self.u_c)), 1e-300)
+        y0 = np.concatenate([self.nominal.run(r.u) for r in self.prep.records])
+        lo, hi = np.percentile(y0, [1, 99])
+        self.y_c = 0.5 * (lo + hi)
+        self.y_s = max(0.5 * (hi - lo), 1e-300)
+        self.thresholds = tuple(2.0 * self.u_s * f for f in HYST_THRESHOLDS)
+        self.n_evals = 0
+
+    @property
+    def span_s(self) -> float:
+        """Length of the data log, s."""
+        r = self.prep.records[0]
+        return float(r.t_s[-1] - r.t_s[0] + self.prep.dt_s)
+
+    # -- linear model with load --------------------------------------------------------------
+    def loaded(self, mu: float, kappa: float = 1.0) -> LinearSim:
+        """The model with ``1 + mu`` times the inertia of its resonances (cached), gain ``kappa``."""
+        key = round(mu, 12)
+        sim = self._lin.get(key)
+        if sim is None:
+            if mu == 0.0:
+                sim = self.nominal
+            else:
+                den = self.den
+                p = np.roots(den)
+                if np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))):
+                    den2 = scale_resonances(den, 1.0 + mu)
+                    den2 = den2 * (den[-1] / den2[-1])
+                else:  # no resonance: the slowest real pole carries the inertia
+                    i = int(np.argmin(np.abs(p.real)))
+                    p2 = p.copy()
+                    p2[i] = p[i] / (1.0 + mu)
+                    den2 = np.real(np.poly(p2)) * den[0]
+                    den2 = den2 * (den[-1] / den2[-1])
+                sim = LinearSim(self.num, den2, self.prep.rate_hz)
+            if len(self._lin) > 64:
+                self._lin.clear()
+            self._lin[key] = sim
+        if kappa == 1.0:
+            return sim
+        return _Scaled(sim, kappa)  # type: ignore[return-value]
+
+    # -- stages ---------------------------------------------------------------------------------
+    def _memo(self, key: tuple, fn):
+        v = self._cache.get(key)
+        if v is None:
+            if len(self._cache) > 256:
+                self._cache.clear()
+            v = fn()
+            self._cache[key] = v
+        return v
+
+    def plays(self, ri: int, x: np.ndarray, key: tuple) -> list[np.ndarray]:
+        """Play operators of the fixed thresholds on ``x`` (cached under ``key``)."""
+        return self._memo(("plays", ri) + key, lambda: list(play(x, np.asarray(self.thresholds), float(x[0]))))
+
+    def stages(self, effects: dict[str, EffectFit], ri: int, upto: int = 99) -> dict[str, np.ndarray]:
+        """Intermediate signals of record ``ri`` through the chain (up to slot ``upto``, exclusive).
+
+        Keys: ``"x_delay"``, ``"x_sat"``, ``"x_map"``, ``"x_eff"`` (input side), ``"y_lin"``,
+        ``"y_int"``, ``"y_asym"``, ``"y_drift"``, ``"y_sat"``, ``"y"`` (output side); a stage
+        past ``upto`` is the identity.
+        """
+        rec = self.prep.records[ri]
+        e = {k: v for k, v in effects.items() if v.slot < upto}
+        out: dict[str, np.ndarray] = {}
+        key: tuple = ()
+        x = rec.u
+        f = e.get("time_delay")
+        if f is not None:
+            key += ("d",) + f.theta
+            x = self._memo(("x", ri) + key, lambda x=x, f=f: _shift(rec.t_s, x, f.theta[0]))
+        out["x_delay"] = x
+        f = e.get("saturation")
+        if f is not None and f.variant.startswith("input"):
+            key += ("si", f.variant) + f.theta
+            x = _clip(x, f)
+        out["x_sat"] = x
+        f = e.get("static_nonlinearity")
+        if f is not None and f.variant == "input":
+            key += ("mi",) + f.theta
+            z = (x - self.u_c) / self.u_s
+            x = x + self.u_s * np.polyval(f.theta[::-1], z)
+        out["x_map"] = x
+        f = e.get("hysteresis")
+        if f is not None:
+            ps = self.plays(ri, x, key)
+            k2 = key + ("h",) + f.theta
+            x = x + sum(w * (p - x) for w, p in zip(f.theta, ps))
+            key = k2
+        out["x_eff"] = x
+        f = e.get("load_mass")
+        mu, kappa = (f.theta if f is not None else (0.0, 1.0))
+        key += ("l", mu, kappa)
+        sim = self.loaded(mu, kappa)
+        y = self._memo(("y", ri) + key, lambda: sim.run(x))
+        out["y_lin"] = y
+        f = e.get("static_nonlinearity")
+        if f is not None and f.variant == "internal":
+            w = (y - self.y_c) / self.y_s
+            y = y + self.unit(sim).run(self.y_s * np.polyval(f.theta[::-1], w))
+        out["y_int"] = y
+        f = e.get("asymmetric_dynamics")
+        if f is not None:
+            y = _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
+        out["y_asym"] = y
+        f = e.get("charge_drift")
+        if f is not None:
+            q = self.charge(out["x_sat"], f.theta[0])
+            y = y * (1.0 + f.theta[1] * q) + self.y_s * f.theta[2] * q
+        out["y_drift"] = y
+        f = e.get("saturation")
+        if f is not None and f.variant.startswith("output"):
+            y = _clip(y, f)
+        out["y_sat"] = y
+        f = e.get("sensor_nonlinearity")
+        if f is not None:
+            w = (y - self.y_c) / self.y_s
+            y = y + self.y_s * np.polyval(f.theta[::-1], w)
+        out["y"] = y
+        self.n_evals += 1
+        return out
+
+    def unit(self, sim: LinearSim) -> "LinearSim | _Scaled":
+        """``sim`` scaled to unit DC gain (or unscaled if its DC gain is ~0)."""
+        g = sim.dc_gain
+        return _Scaled(sim, 1.0 / g) if abs(g) > 1e-12 else sim
+
+    def charge(self, x: np.ndarray, tau_s: float) -> np.ndarray:
+        """Slow low-pass (``tau_s``) of the input from zero (nothing stored when the log starts), over the input's scale."""
+        a = -math.expm1(-self.prep.dt_s / tau_s)
+        q = signal.lfilter([a], [1.0, a - 1.0], x)
+        return q / self.u_s
+
+    def simulate(self, effects: dict[str, EffectFit], ri: int) -> np.ndarray:
+        """Output of record ``ri`` for the nominal model plus ``effects``."""
+        return self.stages(effects, ri)["y"]
+
+    def residuals(self, effects: dict[str, EffectFit], mask: str) -> np.ndarray:
+        """Stacked ``y - y_hat`` over the records' ``mask`` ("train" or "hold") samples."""
+        parts = []
+        for ri, rec in enumerate(self.prep.records):
+            m = getattr(rec, mask)
+            if m.any():
+                parts.append((rec.y - self.simulate(effects, ri))[m])
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+
+class _Scaled:
+    """A linear simulator times a constant."""
+
+    def __init__(self, sim: LinearSim, k: float) -> None:
+        self.sim, self.k = sim, float(k)
+        self.dc_gain = sim.dc_gain * self.k
+
+    def run(self, u: np.ndarray) -> np.ndarray:
+        return self.k * self.sim.run(u)
+
+
+def _asym_lag(y: np.ndarray, dt: float, theta: tuple[float, ...], y_c: float, y_s: float) -> np.ndarray:
+    """Direction-dependent lag: ``tau_rise`` while rising, ``tau_fall exp(k w)`` while falling.
+
+    ``w = (z - y_c) / y_s`` (clipped to [-2, 2]) lets the falling time constant depend on
+    the level (log-linearly; ``k = 0``: constant).
+    """
+    tau_up, tau_dn = theta[0], theta[1]
+    k = theta[2] if len(theta) > 2 else 0.0
+    if k == 0.0:
+        return asymmetric_lag(y, dt, tau_up, tau_dn, float(y[0]))
+    a_up = 1.0 if tau_up <= 0 else -math.expm1(-dt / tau_up)
+    z = float(y[0])
+    out = [0.0] * y.size
+    inv = 1.0 / y_s
+    exp = math.exp
+    for i, xi in enumerate(y.tolist()):
+        d = xi - z
+        if d > 0.0:
+            z += d * a_up
+        else:
+            w = (z - y_c) * inv
+            w = 2.0 if w > 2.0 else (-2.0 if w < -2.0 else w)
+            tau = tau_dn * exp(k * w)
+            z += d * (dt / (tau + dt))
+        out[i] = z
+    return np.asarray(out)
+
+
+def _shift(t: np.ndarray, x: np.ndarray, d: float) -> np.ndarray:
+    return np.interp(t - d, t, x, left=x[0], right=x[-1])
+
+
+def _clip(x: np.ndarray, f: EffectFit) -> np.ndarray:
+    return np.minimum(x, f.theta[0]) if f.variant.endswith("upper") else np.maximum(x, f.theta[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# fitting
+
+
+def _train_target(pipe: Pipeline) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    ys, ms = [], []
+    for rec in pipe.prep.records:
+        ys.append(rec.y)
+        ms.append(rec.train)
+    return ys, ms
+
+
+def _downstream_nonlinear(effects: dict[str, EffectFit], slot: int) -> bool:
+    return any(f.slot > slot and f.name not in _LINEAR_STAGES for f in effects.values())
+
+
+def _sse(pipe: Pipeline, effects: dict[str, EffectFit]) -> float:
+    r = pipe.residuals(effects, "train")
+    return float(r @ r)
+
+
+def _with(effects: dict[str, EffectFit], fit: EffectFit) -> dict[str, EffectFit]:
+    e = dict(effects)
+    e[fit.name] = fit
+    return e
+
+
+def _refine(pipe: Pipeline, effects: dict[str, EffectFit], fit: EffectFit, lo, hi, max_nfev: int = 40,
+            x_scale=None) -> EffectFit:
+    """Nonlinear least squares on the training residual from ``fit``'s parameters."""
+    def fun(th: np.ndarray) -> np.ndarray:
+        return pipe.residuals(_with(effects, EffectFit(fit.name, fit.variant, tuple(map(float, th)))), "train")
+
+    x0 = np.clip(np.asarray(fit.theta, float), lo, hi)
+    try:
+        res = optimize.least_squares(fun, x0, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
+                                     x_scale=x_scale if x_scale is not None else "jac", diff_step=1e-3)
+    except (ValueError, np.linalg.LinAlgError):
+        return fit
+    cand = EffectFit(fit.name, fit.variant, tuple(map(float, res.x)))
+    return cand if 2.0 * res.cost <= _sse(pipe, _with(effects, fit)) else fit
+
+
+def _ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, nonneg: bool = False) -> np.ndarray:
+    """Least-squares weights of basis responses (per record) against the current training residual."""
+    cols, rhs = [], []
+    for ri, rec in enumerate(pipe.prep.records):
+        m = rec.train
+        if not m.any():
+            continue
+        st = pipe.stages(effects, ri)
+        B = basis_fn(ri, st)
+        cols.append(np.column_stack(B)[m])
+        rhs.append((rec.y - st["y"])[m])
+    A = np.vstack(cols)
+    b = np.concatenate(rhs)
+    scale = np.sqrt(np.sum(A * A, axis=0))
+    scale[scale == 0] = 1.0
+    if nonneg:
+        sol = optimize.lsq_linear(A / scale, b, bounds=(0.0, np.inf)).x
+    else:
+        sol = np.linalg.lstsq(A / scale, b, rcond=None)[0]
+    return sol / scale
+
+
+def _fit_scalar(pipe: Pipeline, effects: dict[str, EffectFit], make, grid: np.ndarray) -> EffectFit | None:
+    """Best of ``make(v)`` over ``grid`` then a bounded refinement between its neighbours."""
+    if grid.size == 0:
+        return None
+    costs = np.array([_sse(pipe, _with(effects, make(float(v)))) for v in grid])
+    i = int(np.argmin(costs))
+    lo = grid[max(i - 1, 0)]
+    hi = grid[min(i + 1, grid.size - 1)]
+    if hi > lo:
+        res = optimize.minimize_scalar(lambda v: _sse(pipe, _with(effects, make(float(v)))), bounds=(lo, hi),
+                                       method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 20})
+        if res.fun <= costs[i]:
+            return make(float(res.x))
+    return make(float(grid[i]))
+
+
+def _fit_delay(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    dt = pipe.prep.dt_s
+    d_max = _delay_max(pipe)
+    grid = dt * np.array([0.5, 1, 1.5, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256])
+    grid = grid[grid <= d_max]
+    return _fit_scalar(pipe, effects, lambda d: EffectFit("time_delay", "input", (d,)), grid)
+
+
+def _fit_saturation(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    best, best_cost = None, np.inf
+    st = [pipe.stages(effects, ri) for ri in range(len(pipe.prep.records))]
+    xs = np.concatenate([s["x_sat"] for s in st])
+    ys = np.concatenate([s["y_drift"] for s in st])
+    qs = np.array([0.6, 0.75, 0.85, 0.92, 0.96, 0.98, 0.99, 0.995])
+    for side, sig in (("input", xs), ("output", ys)):
+        for end in ("upper", "lower"):
+            grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
+            variant = f"{side}:{end}"
+            fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)), grid)
+            if fit is None:
+                continue
+            c = _sse(pipe, _with(effects, fit))
+            if c < best_cost:
+                best, best_cost = fit, c
+    return best
+
+
+def _fit_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    best, best_cost = None, np.inf
+    for variant in ("input", "internal"):
+        slot = _SLOT[f"static_nonlinearity:{variant}"]
+
+        def basis(ri, st, variant=variant):
+            f = effects.get("load_mass")
+            sim = pipe.loaded(*(f.theta if f else (0.0, 1.0)))
+            if variant == "input":
+                z = (st["x_map"] - pipe.u_c) / pipe.u_s
+                return [sim.run(pipe.u_s * z ** j) for j in range(STATIC_DEGREE + 1)]
+            w = (st["y_lin"] - pipe.y_c) / pipe.y_s
+            g1 = pipe.unit(sim)
+            return [g1.run(pipe.y_s * w ** j) for j in range(STATIC_DEGREE + 1)]
+
+        base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+        th = _ls(pipe, base, basis)
+        fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
+        if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
+            fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
+        c = _sse(pipe, _with(base, fit))
+        if c < best_cost:
+            best, best_cost = fit, c
+    return best
+
+
+def _fit_sensor(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    def basis(ri, st):
+        w = (st["y_sat"] - pipe.y_c) / pipe.y_s
+        return [pipe.y_s * w ** j for j in range(STATIC_DEGREE + 1)]
+
+    th = _ls(pipe, effects, basis)
+    return EffectFit("sensor_nonlinearity", "output", tuple(map(float, th)))
+
+
+def _fit_hysteresis(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    def basis(ri, st):
+        f = effects.get("load_mass")
+        sim = pipe.loaded(*(f.theta if f else (0.0, 1.0)))
+        x = st["x_map"]
+        key = ("hfit",) + tuple(sorted((k, v.variant, v.theta) for k, v in effects.items() if v.slot < 3))
+        ps = pipe.plays(ri, x, key)
+        return [sim.run(p - x) for p in ps]
+
+    th = _ls(pipe, effects, basis, nonneg=True)
+    fit = EffectFit("hysteresis", "input", tuple(map(float, th)))
+    if _downstream_nonlinear(effects, 3):
+        fit = _refine(pipe, effects, fit, 0.0, np.inf, max_nfev=25)
+    return fit
+
+
+def _fit_load(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    best, best_cost = None, np.inf
+    for mu in (-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.6, 1.0, 2.0):
+        base = _with(effects, EffectFit("load_mass", "model", (mu, 1.0)))
+        # kappa enters linearly when nothing nonlinear is downstream: y_new = kappa * y_lin + rest
+        cols, rhs = [], []
+        for ri, rec in enumerate(pipe.prep.records):
+            if rec.train.any():
+                st = pipe.stages(base, ri)
+                cols.append(st["y_lin"][rec.train])
+                rhs.append((rec.y - st["y"] + st["y_lin"])[rec.train])
+        a, b = np.concatenate(cols), np.concatenate(rhs)
+        kappa = float(np.clip(a @ b / max(a @ a, 1e-300), 0.05, 20.0))
+        fit = EffectFit("load_mass", "model", (mu, kappa))
+        c = _sse(pipe, _with(effects, fit))
+        if c < best_cost:
+            best, best_cost = fit, c
+    assert best is not None
+    return _refine(pipe, effects, best, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
+                   x_scale=np.array([0.1, 0.1]))
+
+
+def _fit_asym(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    tdom = max(pipe.t_dom, 2 * pipe.prep.dt_s)
+    best, best_cost = None, np.inf
+    for k in (0.15, 0.5, 1.5, 4.0):
+        for slow_down in (True, False):
+            th = (0.0, k * tdom, 0.0) if slow_down else (k * tdom, 0.0, 0.0)
+            fit = EffectFit("asymmetric_dynamics", "output", th)
+            c = _sse(pipe, _with(effects, fit))
+            if c < best_cost:
+                best, best_cost = fit, c
+    assert best is not None
+    hi = 20.0 * tdom
+    return _refine(pipe, effects, best, np.array([0.0, 0.0, -3.0]), np.array([hi, hi, 3.0]), max_nfev=15,
+                   x_scale=np.array([0.1 * tdom, 0.1 * tdom, 0.3]))
+
+
+def _fit_drift(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    span = pipe.span_s
+    tau_min = _tau_min(pipe)
+    taus = span * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0])
+    taus = np.unique(np.clip(taus, tau_min, None))
+
+    def ls_at(tau: float) -> EffectFit:
+        def basis(ri, st):
+            q = pipe.charge(st["x_sat"], tau)
+            return [st["y_asym"] * q, pipe.y_s * q]
+
+        base = {k: v for k, v in effects.items() if k != "charge_drift"}
+        g, o = _ls(pipe, base, basis)
+        return EffectFit("charge_drift", "output", (float(tau), float(g), float(o)))
+
+    best = min((ls_at(float(t)) for t in taus), key=lambda f: _sse(pipe, _with(effects, f)))
+    lt = math.log(best.theta[0])
+    res = optimize.minimize_scalar(lambda v: _sse(pipe, _with(effects, ls_at(math.exp(v)))),
+                                   bounds=(max(lt - 0.7, math.log(tau_min)), lt + 0.7), method="bounded",
+                                   options={"maxiter": 12})
+    cand = ls_at(math.exp(float(res.x)))
+    if _sse(pipe, _with(effects, cand)) < _sse(pipe, _with(effects, best)):
+        best = cand
+    if _downstream_nonlinear(effects, 7):
+        best = _refine(pipe, effects, best, np.array([tau_min, -np.inf, -np.inf]), np.array([10 * span, np.inf, np.inf]),
+                       max_nfev=20)
+    return best
+
+
+def family_bounds(pipe: Pipeline, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of ``fit``'s parameters (for refinement)."""
+    n = fit.n_params
+    inf = np.full(n, np.inf)
+    tdom = max(pipe.t_dom, 2 * pipe.prep.dt_s)
+    if fit.name == "time_delay":
+        return np.zeros(1), np.array([_delay_max(pipe)])
+    if fit.name == "hysteresis":
+        return np.zeros(n), inf
+    if fit.name == "load_mass":
+        return np.array([-0.8, 0.05]), np.array([10.0, 20.0])
+    if fit.name == "asymmetric_dynamics":
+        return np.array([0.0, 0.0, -3.0]), np.array([20.0 * tdom, 20.0 * tdom, 3.0])
+    if fit.name == "charge_drift":
+        return np.array([_tau_min(pipe), -np.inf, -np.inf]), np.array([10 * pipe.span_s, np.inf, np.inf])
+    return -inf, inf
+
+
+def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 12) -> dict[str, EffectFit]:
+    """All parameters of ``effects`` refined together on the training samples (variants kept)."""
+    if not effects:
+        return effects
+    names = list(effects)
+    sizes = [effects[k].n_params for k in names]
+    x0 = np.concatenate([np.asarray(effects[k].theta, float) for k in names])
+    bl = [family_bounds(pipe, effects[k]) for k in names]
+    lo = np.concatenate([b[0] for b in bl])
+    hi = np.concatenate([b[1] for b in bl])
+    x0 = np.clip(x0, lo, hi)
+
+    def build(x: np.ndarray) -> dict[str, EffectFit]:
+        out, i = {}, 0
+        for k, m in zip(names, sizes):
+            out[k] = EffectFit(k, effects[k].variant, tuple(map(float, x[i:i + m])))
+            i += m
+        return out
+
+    base_cost = _sse(pipe, build(x0))
+    try:
+        res = optimize.least_squares(lambda x: pipe.residuals(build(x), "train"), x0, bounds=(lo, hi),
+                                     method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3)
+    except (ValueError, np.linalg.LinAlgError):
+        return effects
+    return build(res.x) if 2.0 * res.cost < base_cost else effects
+
+
+def _delay_max(pipe: Pipeline) -> float:
+    dt = pipe.prep.dt_s
+    return min(0.1 * pipe.span_s, max(60.0 * dt, 0.5 * pipe.t_dom))
+
+
+def _tau_min(pipe: Pipeline) -> float:
+    return max(20.0 * pipe.t_dom, 0.3 * pipe.span_s, 50.0 * pipe.prep.dt_s)
+
+
+_FITTERS = {
+    "time_delay": _fit_delay, "saturation": _fit_saturation, "static_nonlinearity": _fit_static,
+    "hysteresis": _fit_hysteresis, "load_mass": _fit_load, "asymmetric_dynamics": _fit_asym,
+    "charge_drift": _fit_drift, "sensor_nonlinearity": _fit_sensor,
+}
+
+
+def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str) -> EffectFit | None:
+    """Fit the augmentation ``name`` on the training samples with ``effects`` held fixed.
+
+    Returns
+    -------
+    EffectFit or None
+        ``None`` if the family cannot be fitted on these data.
+    """
+    base = {k: v for k, v in effects.items() if k != name}
+    try:
+        return _FITTERS[name](pipe, base)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+
+
+def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = ("", "")) -> dict:
+    """The fitted parameters of ``fit`` in physical terms (JSON-ready)."""
+    ui, uo = units
+    th = fit.theta
+    out: dict = {"variant": fit.variant}
+    if fit.name == "time_delay":
+        out["delay_s"] = th[0]
+    elif fit.name == "saturation":
+        side, end = fit.variant.split(":")
+        out["acts_on"] = side
+        out["unit"] = ui if side == "input" else uo
+        out["upper" if end == "upper" else "lower"] = th[0]
+    elif fit.name in ("static_nonlinearity", "sensor_nonlinearity"):
+        side = "output" if fit.name == "sensor_nonlinearity" else ("input" if fit.variant == "input" else "output")
+        c, s = (pipe.u_c, pipe.u_s) if side == "input" else (pipe.y_c, pipe.y_s)
+        names = (tuple(f"z^{j}" for j in range(len(th))) if fit.name == "static_nonlinearity"
+                 else tuple(f"w^{j}" for j in range(len(th))))
+        out["coefficients"] = dict(zip(names, th))
+        out["normalisation"] = {"centre": c, "half_range": s, "unit": ui if side == "input" else uo,
+                                "form": ("x + s*sum_j a_j z^j, z = (x - c)/s"
+                                         if fit.name == "static_nonlinearity" and fit.variant == "input" else
+                                         "y + G1(s*sum_j b_j w^j), w = (y - c)/s, G1 = G/G(0)"
+                                         if fit.name == "static_nonlinearity" else
+                                         "y + s*sum_j c_j w^j, w = (y - c)/s")}
+        xs = np.linspace(c - s, c + s, 9)
+        z = (xs - c) / s
+        if fit.name == "static_nonlinearity":
+            dev = s * np.polyval(list(th)[::-1], z)
+        else:
+            dev = s * np.polyval(list(th)[::-1], z)
+        out["curve"] = {"at": xs.tolist(), "deviation": dev.tolist()}
+    elif fit.name == "hysteresis":
+        out["thresholds"] = list(pipe.thresholds)
+        out["weights"] = list(th)
+        out["unit"] = ui
+        out["loop_half_width"] = float(sum(w * r for w, r in zip(th, pipe.thresholds)))
+    elif fit.name == "load_mass":
+        out["mass_ratio"] = th[0]
+        out["gain_factor"] = th[1]
+        out["resonance_factor"] = 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")
+    elif fit.name == "asymmetric_dynamics":
+        out["tau_rising_s"] = th[0]
+        out["tau_falling_s"] = th[1]
+        out["falling_tau_level_slope"] = th[2]
+        out["form"] = "lag: tau_rising while rising, tau_falling*exp(k*w) while falling, w = (y - c)/s"
+    elif fit.name == "charge_drift":
+        out["tau_s"] = th[0]
+        out["gain_change_per_input_half_range"] = th[1]
+        out["offset_per_input_half_range"] = th[2] * pipe.y_s
+        out["unit"] = uo
+    return out

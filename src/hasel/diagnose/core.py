@@ -1,0 +1,492 @@
+"""Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far it shrinks.
+
+:func:`diagnose` takes any SISO log (times, input, output in any units and rates) and
+a nominal model (or identifies a linear one first), then
+
+1. **where**: localises the nominal residual (:mod:`hasel.diagnose.where`) against
+   the noise floor estimated from the data;
+2. **which**: fits every generic augmentation (:mod:`hasel.diagnose.augment`) on
+   the training samples and scores it by the held-out gap it removes; forward
+   selection adds the best one while it helps significantly (see
+   :class:`DiagnoseOptions`), re-fitting the candidates on top of what is chosen;
+3. **how far**: held-out NRMSE of the nominal and augmented models after each
+   effect, and the distance to the noise floor.
+
+The acceptance test of a candidate is on held-out data: it must remove at least a
+given share of the held-out residual energy and of the part of it above the noise
+floor, significantly against the noise floor (if the current residual were white
+noise of the floor's variance, the drop in held-out squared error that a change
+``delta`` of the prediction brings would have mean ``-||delta||^2`` and standard
+deviation ``2 sigma ||delta||``; the drop must be ``z_min`` of those), and it must
+lower the training BIC with the noise variance known (``ln(n)`` per parameter).
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hasel.diagnose.augment import FAMILIES, EffectFit, Pipeline, describe_params, fit_family, joint_refine
+from hasel.diagnose.prep import Prepared, estimate_noise, nrmse, prepare
+from hasel.diagnose.where import analyse
+from hasel.errors import BadInputError
+
+__all__ = ["DiagnoseOptions", "Verdict", "diagnose"]
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """Settings of :func:`diagnose` (defaults tuned on the blind check).
+
+    Attributes
+    ----------
+    max_effects : int
+        Most effects named.
+    min_first_gain, min_next_gain : float
+        Share of the held-out residual energy the first / each further effect must remove.
+    min_gap_share : float
+        Share of the held-out residual energy *above the noise floor* it must remove.
+    floor_margin : float
+        No further effect once the held-out NRMSE is within this factor of the floor.
+    z_min : float
+        Paired z statistic of the held-out improvement.
+    asym_ratio_min : float
+        ``asymmetric_dynamics`` needs one time constant this many times the other.
+    top_k : int
+        Candidate families tried per round (all eight by default).
+    pair_pool : int
+        In the second round, pairs among this many best single effects are fitted too.
+    pair_alternate : int
+        The most promising pairs whose two fits are alternated (each refitted given the other).
+    swap_ratio : float
+        An earlier choice is swapped for another family when that lowers the held-out
+        mean squared error below this ratio.
+    min_nominal_share : float
+        Share of the nominal model's held-out gap above the floor each effect must remove.
+    near_all_gain, min_nominal_share_near_all : float
+        ...unless it removes at least ``near_all_gain`` of what is left, then this smaller share.
+    joint_refine : bool
+        Refine all chosen effects' parameters together at the end.
+    joint_refine_nfev : int
+        Iterations of that refinement.
+    identify : {"auto", "internal", "ident"}
+        Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
+        else the internal output-error fit.
+    target_rate_hz : float or None
+        Force the working rate.
+    n_blocks : int
+        Interleaved blocks of a self-held-out split.
+    max_samples : int
+        Cap on working samples.
+    max_order : int
+        Largest order of the internal linear fit.
+    progress : callable or None
+        Called with one-line progress messages (e.g. ``print`` to stderr).
+    """
+
+    max_effects: int = 3
+    min_first_gain: float = 0.05
+    min_next_gain: float = 0.12
+    min_gap_share: float = 0.2
+    floor_margin: float = 1.1
+    z_min: float = 5.0
+    asym_ratio_min: float = 2.0
+    top_k: int = 8
+    pair_pool: int = 5
+    pair_alternate: int = 6
+    swap_ratio: float = 0.97
+    min_nominal_share: float = 0.03
+    near_all_gain: float = 0.5
+    min_nominal_share_near_all: float = 0.008
+    joint_refine: bool = True
+    joint_refine_nfev: int = 12
+    identify: str = "auto"
+    target_rate_hz: float | None = None
+    n_blocks: int = 30
+    max_samples: int = 60_000
+    max_order: int = 4
+    progress: Callable[[str], None] | None = None
+
+
+@dataclass
+class Verdict:
+    """The result of :func:`diagnose`.
+
+    Attributes
+    ----------
+    effects : list of dict
+        Named effects, most important first: ``name``, ``params``, ``evidence``,
+        ``nrmse_after`` (held-out), ``gap_removed`` (share of the held-out residual
+        energy removed), ``n_params``.
+    where : dict
+        The residual's localisation (see :mod:`hasel.diagnose.where`).
+    heldout : dict
+        ``nrmse_nominal``, ``nrmse_augmented``, ``split``, ``n_samples``.
+    noise_floor_nrmse : float
+        NRMSE that noise alone would give on the held-out data.
+    model : dict
+        The nominal model used: ``num``, ``den``, ``source``.
+    rounds : list of dict
+        Every candidate's held-out NRMSE per selection round.
+    export : dict of ndarray
+        ``t_s``, ``measured``, ``nominal``, ``augmented`` over the held-out samples.
+    """
+
+    effects: list[dict]
+    where: dict
+    heldout: dict
+    noise_floor_nrmse: float
+    model: dict
+    rounds: list[dict]
+    working_rate_hz: float
+    export: dict = field(repr=False, default_factory=dict)
+    plots: dict = field(repr=False, default_factory=dict)
+    elapsed_s: float = 0.0
+
+    @property
+    def names(self) -> list[str]:
+        """Effect names in rank order."""
+        return [e["name"] for e in self.effects]
+
+    def to_json(self) -> dict:
+        """VERDICT.json content (``shared/interfaces.md``)."""
+        return {"effects": self.effects, "where": self.where, "heldout": self.heldout,
+                "noise_floor_nrmse": self.noise_floor_nrmse, "model": self.model, "rounds": self.rounds,
+                "working_rate_hz": self.working_rate_hz, "elapsed_s": self.elapsed_s}
+
+
+def _as_model(model) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(model, dict):
+        if "num" not in model or "den" not in model:
+            raise BadInputError("the model needs 'num' and 'den' (continuous transfer function, descending powers of s)")
+        num, den = model["num"], model["den"]
+    else:
+        try:
+            num, den = model
+        except (TypeError, ValueError) as err:
+            raise BadInputError("model must be (num, den) or a dict with 'num' and 'den'") from err
+    try:
+        num = np.atleast_1d(np.asarray(num, float))
+        den = np.atleast_1d(np.asarray(den, float))
+    except (TypeError, ValueError) as err:
+        raise BadInputError(f"model coefficients must be numbers: {err}") from err
+    if num.ndim != 1 or den.ndim != 1 or not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+        raise BadInputError("model num/den must be 1-D lists of finite numbers")
+    den = np.trim_zeros(den, "f")
+    if den.size == 0:
+        raise BadInputError("model den is all zeros")
+    return num, den
+
+
+def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, np.ndarray, dict]:
+    if opts.identify not in ("auto", "internal", "ident"):
+        raise BadInputError(f"identify must be 'auto', 'internal' or 'ident', got {opts.identify!r}")
+    tried = None
+    if opts.identify in ("auto", "ident"):
+        try:
+            from hasel.ident import identify as ident_identify  # type: ignore[attr-defined]
+
+            rec = prep.records[0]
+            m = rec.train
+            res = ident_identify(rec.t_s[m], rec.u[m], rec.y[m])
+            mj = res.to_model_json()
+            num, den = _as_model(mj)
+            if np.any(np.real(np.roots(den)) >= 0):
+                raise ValueError("unstable")
+            return num, den, {"source": "hasel.ident", "details": {k: v for k, v in mj.items()
+                                                                    if k not in ("num", "den")}}
+        except Exception as err:  # noqa: BLE001 - any failure falls back to the internal fit
+            if opts.identify == "ident":
+                raise BadInputError(f"hasel.ident could not identify a model: {err}") from err
+            tried = f"hasel.ident unavailable or failed ({type(err).__name__}: {err})"
+    from hasel.diagnose.linfit import fit_linear
+
+    say("identifying a linear model (internal output-error fit)")
+    num, den, info = fit_linear(prep, max_order=opts.max_order)
+    if tried:
+        info["note"] = tried
+    return num, den, {"source": "identified from the log", "details": info}
+
+
+def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tuple[str, float] | None,
+              pipe: Pipeline) -> str:
+    lv, dr, tm, fr = where["level"], where["direction"], where["time"], where["frequency"]
+    me = fr["model_error"]
+    bands = me.get("significant_bands_hz") or []
+    band_txt = ", ".join(f"{a:.3g}-{b:.3g} Hz" for a, b in bands[:3]) or "no band"
+    sig = {
+        "static_nonlinearity": lambda: (f"the residual follows the operating level (level bins explain "
+                                f"{100 * max(lv['share_input_level'], lv['share_output_level']):.0f} % of it, the "
+                                f"direction only {100 * dr['extra_share']:.0f} % more); the distortion passes "
+                                f"through the dynamics ({fit.variant} map)"),
+        "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
+                                f"explain {100 * lv['share_instant_output']:.0f} %) applied after the dynamics: "
+                                f"an output-side map fits better than an input-side one"),
+        "saturation": lambda: (f"the residual is confined to the {fit.variant.split(':')[1]} end of the "
+                       f"{fit.variant.split(':')[0]} range: a hard limit at {fit.theta[0]:.4g}"),
+        "time_delay": lambda: (f"the residual tracks the nominal output's rate (correlation "
+                       f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
+                       f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
+        "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {100 * me['linear_share']:.0f} % of "
+                      f"the residual, significant in {band_txt}): the resonance and gain moved "
+                      f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g})"),
+        "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
+                       f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
+                       f"direction adds {100 * dr['extra_share']:.0f} % to the level's share) and a "
+                       f"rate-independent play-operator memory explains it"),
+        "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
+                                f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
+                                f"rises with tau {fit.theta[0]:.3g} s and falls with tau {fit.theta[1]:.3g} s"),
+        "charge_drift": lambda: (f"the residual varies slowly in time (slow share {100 * tm['slow_share']:.0f} %, trend "
+                         f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
+                         f"{fit.theta[0]:.3g} s), not its present level"),
+    }[name]()
+    txt = f"{sig}; removes {100 * gain:.0f} % of the held-out residual energy"
+    if runner_up is not None:
+        txt += f" (next best: {runner_up[0]}, {100 * runner_up[1]:.0f} %)"
+    return txt
+
+
+def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldout: tuple | None = None,
+             options: DiagnoseOptions | None = None, units: tuple[str, str] = ("", "")) -> Verdict:
+    """Diagnose the gap between a SISO log and a nominal linear model.
+
+    Parameters
+    ----------
+    t_s, u, y : array_like, shape (n,)
+        Times (s), input and output of the log, any units and rate.
+    model : (num, den) or dict or None
+        Continuous transfer function from input to output (descending powers of s,
+        as MODEL.json); ``None`` identifies one from the training part of the log.
+    heldout : (t_s, u, y) or None
+        A separate log (same rate) for scoring; ``None`` holds out interleaved
+        blocks of the log itself.
+    options : DiagnoseOptions, optional
+        Thresholds and settings.
+    units : (str, str)
+        Names of the input and output units, for the report.
+
+    Returns
+    -------
+    Verdict
+
+    Raises
+    ------
+    BadInputError
+        For unusable data or models.
+    """
+    opts = options or DiagnoseOptions()
+    say = opts.progress or (lambda msg: None)
+    t0 = time.perf_counter()
+    if model is not None:
+        num, den = _as_model(model)
+        source = {"source": "given"}
+    else:
+        num = den = None
+        source = {}
+    prep = prepare(t_s, u, y, heldout=heldout, model_den=den, target_rate_hz=opts.target_rate_hz,
+                   n_blocks=opts.n_blocks, max_samples=opts.max_samples)
+    say(f"working rate {prep.rate_hz:.4g} Hz ({prep.records[0].u.size} samples), {prep.split}")
+    if model is None:
+        num, den, source = _identify(prep, opts, say)
+    pipe = Pipeline(prep, num, den)
+
+    # noise floor from the nominal residual of the log
+    r0 = prep.records[0].y - pipe.simulate({}, 0)
+    sigma2, method = estimate_noise(r0, prep.rate_hz, prep.f_excited_hz)
+    y_ho = prep.stacked("y", "hold")
+    if y_ho.size < 10:
+        raise BadInputError("too little held-out data to score a model")
+    norm_ho = float(np.sum((y_ho - y_ho.mean()) ** 2))
+    floor = math.sqrt(sigma2 * y_ho.size / norm_ho) if norm_ho > 0 else float("inf")
+    say(f"noise floor: rms {math.sqrt(sigma2):.3g} ({method}), NRMSE {floor:.4f}")
+    where = analyse(pipe, sigma2, method)
+    arrays = where.pop("_arrays")
+
+    def scores(eff: dict[str, EffectFit]) -> tuple[float, float, np.ndarray]:
+        e_tr = pipe.residuals(eff, "train")
+        e_ho = pipe.residuals(eff, "hold")
+        return float(np.mean(e_tr ** 2)), float(np.mean(e_ho ** 2)), e_ho
+
+    current: dict[str, EffectFit] = {}
+    mse_tr, mse_ho, e_ho = scores(current)
+    mse_nom = mse_ho
+    nrmse_nom = math.sqrt(mse_ho * y_ho.size / norm_ho)
+    n_tr = prep.stacked("y", "train").size
+    to_nrmse = lambda m: math.sqrt(max(m, 0.0) * y_ho.size / norm_ho)  # noqa: E731
+    say(f"nominal held-out NRMSE {nrmse_nom:.4f}")
+    rounds: list[dict] = []
+    evidence_of: dict[str, tuple] = {}
+
+    def try_all(base: dict[str, EffectFit], names: list[str], inits: dict | None = None) -> list[tuple]:
+        """Fit each family on top of ``base``: sorted (mse_ho, n_params, name, fit, mse_tr, e_ho, effects)."""
+        out = []
+        for name in names:
+            tc = time.perf_counter()
+            fit = fit_family(pipe, base, name)
+            if fit is None:
+                continue
+            if name == "asymmetric_dynamics":
+                lo_, hi_ = sorted(fit.theta[:2])
+                if hi_ < opts.asym_ratio_min * (lo_ + 0.5 * prep.dt_s):
+                    say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
+                    continue
+            eff = dict(base)
+            eff[name] = fit
+            m_tr, m_ho, e_new = scores(eff)
+            out.append((m_ho, fit.n_params, name, fit, m_tr, e_new, eff))
+            label = " + ".join(list(base) + [name])
+            say(f"  {label:40s} held-out NRMSE {to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
+        out.sort(key=lambda r: (r[0], r[1]))
+        return out
+
+    prior = {n: i for i, n in enumerate(FAMILIES)}
+
+    def pick(results: list[tuple]) -> tuple:
+        """Lowest held-out error; near-ties (1 %) go to fewer parameters, then to the earlier family.
+
+        The family order (FAMILIES) is the tie-break prior: an offset or a curvature that the
+        data cannot place before or after the dynamics is read as the actuator's static map
+        rather than the sensor's.
+        """
+        best = results[0]
+        for r in results[1:]:
+            if r[0] <= 1.01 * best[0] and (r[1] < best[1] or (r[1] == best[1] and r[0] <= 1.005 * best[0]
+                                                              and prior[r[2]] < prior[best[2]])):
+                best = r
+        return best
+
+    for rnd in range(opts.max_effects):
+        if to_nrmse(mse_ho) <= opts.floor_margin * floor:
+            say("at the noise floor: no further effect")
+            break
+        results = try_all(current, [f for f in FAMILIES if f not in current][:max(opts.top_k, 1)])
+        if rnd == 0:
+            singles = results
+        elif rnd == 1 and opts.pair_pool > 1:
+            # pairs among the best single effects, not only those holding the very best: the best
+            # single augmentation may be soaking up two effects' signatures
+            pool = [r for r in singles[:opts.pair_pool] if r[2] not in current]
+            for i, a in enumerate(pool):
+                results += try_all({a[2]: a[3]}, [b[2] for b in pool[i + 1:]])
+            results.sort(key=lambda r: (r[0], r[1]))
+            # sequential fits of a pair can lock the first effect into soaking up the second:
+            # alternate (refit each given the other) for the most promising pairs
+            improved = []
+            for r in results[:opts.pair_alternate]:
+                eff = dict(r[6])
+                names_ = list(eff)
+                for _ in range(2):
+                    for nm in names_:
+                        f2 = fit_family(pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm)
+                        if f2 is not None:
+                            trial = {**eff, nm: f2}
+                            if scores(trial)[0] <= scores(eff)[0]:
+                                eff = trial
+                m_tr2, m_ho2, e2 = scores(eff)
+                if m_ho2 < r[0]:
+                    say(f"  {' + '.join(eff):40s} held-out NRMSE {to_nrmse(m_ho2):.4f} (alternating fits)")
+                    improved.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+            results = sorted(results + improved, key=lambda r: (r[0], r[1]))
+        if not results:
+            break
+        m_ho, k, name, fit, m_tr, e_new, eff_new = pick(results)
+        k = sum(f.n_params for f in eff_new.values()) - sum(f.n_params for f in current.values())
+        rounds.append({"round": rnd + 1, "candidates": [
+            {"name": " + ".join(r[6]), "nrmse_heldout": to_nrmse(r[0]), "n_params": r[1]} for r in results]})
+        gain = (mse_ho - m_ho) / mse_ho if mse_ho > 0 else 0.0
+        above = max(mse_ho - sigma2, 0.0)
+        gap_share = (mse_ho - m_ho) / above if above > 0 else 0.0
+        nominal_share = (mse_ho - m_ho) / max(mse_nom - sigma2, 1e-300)
+        # against the noise floor: with white noise of variance sigma2 left in the current residual,
+        # the held-out SSE drop of a change delta has sd 2 sigma ||delta||
+        delta = e_ho - e_new
+        z = float(np.sum(e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
+        dbic = -(mse_tr - m_tr) * n_tr / sigma2 + k * math.log(n_tr)
+        need = opts.min_first_gain if rnd == 0 else opts.min_next_gain
+        # a share of the nominal gap, or (smaller) if it explains nearly all that is left
+        big_enough = nominal_share >= opts.min_nominal_share or (
+            gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all)
+        ok = gain >= need and gap_share >= opts.min_gap_share and big_enough and z >= opts.z_min and dbic < 0
+        rounds[-1].update({"best": " + ".join(eff_new), "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
+                           "z": z, "delta_bic": dbic, "accepted": bool(ok)})
+        say(f"round {rnd + 1}: best {' + '.join(eff_new)}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
+            f"of the nominal gap {100 * nominal_share:.0f} %), z {z:.1f}, dBIC {dbic:.3g} -> "
+            f"{'accepted' if ok else 'rejected'}")
+        if not ok:
+            break
+        r2 = next((r for r in results if r[2] != name), None)
+        for n_new in eff_new:
+            if n_new not in current:
+                evidence_of[n_new] = (gain, (r2[2], (mse_ho - r2[0]) / mse_ho) if r2 is not None and mse_ho > 0
+                                      else None)
+        for n_old in [n for n in current if n not in eff_new]:
+            evidence_of.pop(n_old, None)
+        current = dict(eff_new)
+        mse_tr, mse_ho, e_ho = m_tr, m_ho, e_new
+        # swaps: with the newcomer in place, could an earlier choice be bettered by another family?
+        for old in [n for n in current if n != name]:
+            base = {k2: v for k2, v in current.items() if k2 != old}
+            alts = try_all(base, [f for f in FAMILIES if f not in current])
+            if alts and alts[0][0] < opts.swap_ratio * mse_ho:
+                a = alts[0]
+                say(f"  swap: {a[2]} replaces {old} (held-out NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(a[0]):.4f})")
+                rounds[-1].setdefault("swaps", []).append({"out": old, "in": a[2], "nrmse_heldout": to_nrmse(a[0])})
+                current = {(a[2] if k2 == old else k2): (a[3] if k2 == old else v) for k2, v in current.items()}
+                evidence_of[a[2]] = evidence_of.pop(old)
+                mse_tr, mse_ho, e_ho = a[4], a[0], a[5]
+
+    if len(current) > 1 and opts.joint_refine:
+        refined = joint_refine(pipe, current, max_nfev=opts.joint_refine_nfev)
+        m_tr, m_ho, e_new = scores(refined)
+        if m_ho <= mse_ho:
+            say(f"joint refinement: held-out NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(m_ho):.4f}")
+            current, mse_tr, mse_ho, e_ho = refined, m_tr, m_ho, e_new
+
+    # rank by importance: the held-out loss when an effect is taken out of the final set
+    def loss_without(n: str) -> float:
+        return scores({k2: v for k2, v in current.items() if k2 != n})[1]
+
+    ranked = sorted(current, key=loss_without, reverse=True)
+    named: list[dict] = []
+    for i, name in enumerate(ranked):
+        fit = current[name]
+        m_after = scores({k2: current[k2] for k2 in ranked[:i + 1]})[1]
+        gain, runner = evidence_of.get(name, (0.0, None))
+        named.append({"name": name, "params": describe_params(pipe, fit, units),
+                      "evidence": _evidence(name, fit, where, gain, runner, pipe),
+                      "nrmse_after": to_nrmse(m_after), "gap_removed": gain,
+                      "n_params": fit.n_params, "theta": list(fit.theta)})
+
+    nrmse_aug = math.sqrt(mse_ho * y_ho.size / norm_ho)
+    # exports over the held-out samples
+    ts, meas, nom, aug = [], [], [], []
+    for ri, rec in enumerate(prep.records):
+        if rec.hold.any():
+            ts.append(rec.t_s[rec.hold])
+            meas.append(rec.y[rec.hold])
+            nom.append(pipe.simulate({}, ri)[rec.hold])
+            aug.append(pipe.simulate(current, ri)[rec.hold])
+    export = {"t_s": np.concatenate(ts), "measured": np.concatenate(meas), "nominal": np.concatenate(nom),
+              "augmented": np.concatenate(aug)}
+    shrink = ((nrmse_nom - nrmse_aug) / (nrmse_nom - floor)) if nrmse_nom > floor else 0.0
+    heldout_d = {"nrmse_nominal": nrmse_nom, "nrmse_augmented": nrmse_aug, "split": prep.split,
+                 "n_samples": int(y_ho.size), "gap_shrink": shrink,
+                 "augmented_over_floor": nrmse_aug / floor if floor > 0 else float("inf")}
+    model_d = {"num": [float(c) for c in num], "den": [float(c) for c in den], **source}
+    elapsed = time.perf_counter() - t0
+    say(f"done in {elapsed:.1f} s: {', '.join(e['name'] for e in named) or 'no effect'}; held-out NRMSE "
+        f"{nrmse_nom:.4f} -> {nrmse_aug:.4f} (floor {floor:.4f})")
+    plots = {"arrays": arrays, "pipe": pipe, "current": current}
+    return Verdict(effects=named, where=where, heldout=heldout_d, noise_floor_nrmse=floor, model=model_d,
+                   rounds=rounds, working_rate_hz=prep.rate_hz, export=export, plots=plots, elapsed_s=elapsed)
+
+
+def stderr_progress(msg: str) -> None:
+    """Progress printer for the CLI (stderr)."""
+    sys.stderr.write(f"hasel diagnose: {msg}\n")
+    sys.stderr.flush()
