@@ -60,6 +60,24 @@ class Applied:
         return self.reason != Reason.NONE
 
 
+def _finite_or_none(value: object) -> float | None:
+    """``value`` as a finite float, or None (NaN, infinite, not a number at all)."""
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _nonfinite(value: object) -> Applied:
+    """0 kV for a request that is not a finite number."""
+    try:
+        req = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        req = math.nan
+    return Applied(req, 0.0, Reason.NONFINITE)
+
+
 @dataclass(frozen=True)
 class HvLimits:
     """Voltage limits of the amplifier command, kV.
@@ -83,12 +101,9 @@ class HvLimits:
 
     def apply(self, requested_kv: float) -> Applied:
         """Limit one request (kV)."""
-        try:
-            req = float(requested_kv)
-        except (TypeError, ValueError):
-            return Applied(math.nan, 0.0, Reason.NONFINITE)
-        if not math.isfinite(req):
-            return Applied(req, 0.0, Reason.NONFINITE)
+        req = _finite_or_none(requested_kv)
+        if req is None:
+            return _nonfinite(requested_kv)
         if req > self.v_max_kv:
             return Applied(req, self.v_max_kv, Reason.CLAMP_HIGH)
         if req < self.v_min_kv:
@@ -98,12 +113,9 @@ class HvLimits:
     @staticmethod
     def precondition(requested_kv: float) -> Applied:
         """The deliberate charge-reversal command (paper: -1 kV), kept in [-2, 0] kV."""
-        try:
-            req = float(requested_kv)
-        except (TypeError, ValueError):
-            return Applied(math.nan, 0.0, Reason.NONFINITE)
-        if not math.isfinite(req):
-            return Applied(req, 0.0, Reason.NONFINITE)
+        req = _finite_or_none(requested_kv)
+        if req is None:
+            return _nonfinite(requested_kv)
         return Applied(req, min(max(req, PRECONDITION_MIN_KV), 0.0), Reason.PRECONDITION)
 
 
