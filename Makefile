@@ -20,7 +20,7 @@ core-without-ros:
 	@bash tools/check_core_without_ros.sh
 
 bench: setup
-	$(HASEL) bench
+	OPENBLAS_NUM_THREADS=1 $(HASEL) bench
 
 clean:
 	rm -rf build install log out

@@ -1,0 +1,454 @@
+"""``hasel bench`` (what ``make bench`` runs): one table of measured figures and ratios, and JSON.
+
+Figures (each measured against its baseline in the same run where one exists):
+
+1. The full graph (plant, driver, filter, controller, amplifier, reference, MCAP
+   recorder) in simulated time, lockstep: simulated seconds per wall second, with
+   rclpy's ``EventsExecutor``; baseline the same graph with the
+   ``SingleThreadedExecutor``. The recording is read back to check that simulated
+   time worked with each executor (one output per 5 ms tick on the exact grid).
+2. The offline core closed loop (:func:`hasel.loop.run_closed_loop`): simulated
+   seconds per wall second, against ``scipy.signal.lsim`` of the same loop's plant on
+   the same input.
+3. Real time at 200 Hz (60 s; ``--quick`` 5 s): one loop with strain-sensor feedback
+   (plant, driver, filter, controller, amplifier, reference) in one process:
+   latency from the sensor stamp to the arrival of the amplifier output carrying it,
+   p50/p99/max, and missed periods; baseline the same loop split over two processes
+   (plant | the other nodes).
+4. Scale: namespaced loops in two worker processes (each hosting half of them in one
+   ``EventsExecutor``), counts raised until a count misses 0.1 % of its periods or a
+   loop's p99 latency exceeds 2 ms; the CPU used at each count; baseline the largest
+   count that held, in one process.
+5. Identification of the paper's campaign (3 actuators x 6 offsets x 60 s at 10 kHz,
+   written to MCAP without the graph and cached under ``out/`` for the run only)
+   against merely loading the same files; the recorder node's message path against
+   a bare ``mcap`` writer writing the same bytes; the MCAP writer alone against the
+   bare writer with the same zstd level.
+6. The diagnosis blind check (:func:`hasel.diagnose.blind.run_blind`): top-1
+   accuracy, the right pair, false alarms and misses, median held-out shrink, time
+   per case ("not available" when that module is absent).
+7. The 200 Hz loop while a busy-loop process loads one core, against figure 3's
+   unloaded run of the same length.
+8. The log loaders fuzzed (mutated MCAP and CSV files through ``load_io`` and
+   ``info``) for a bounded time: cases, hangs, crashes other than
+   DataFileError/BadInputError, peak memory. Failing inputs are kept in
+   ``bench_fuzz_failures/`` beside the JSON file.
+
+Executors, and why:
+
+- Simulated time (figure 1, and ``hasel steps/calibrate/chirp/demo``):
+  ``EventsExecutor``, in one process. Lockstep makes every tick a chain of message
+  hops, so the cost per hop sets the speed; it is several times lower there than in
+  the ``SingleThreadedExecutor`` (both measured here), and ``/clock`` driven
+  timers fire at the right simulated stamps with it (checked on the recording).
+- Real time (figures 3, 4, 7): ``EventsExecutor`` in each worker process, whole
+  loops per process (no loop split across processes: an inter-process hop costs
+  more latency than the in-process one, measured as figure 3's baseline); plants'
+  timers started at staggered phases; garbage collector frozen after set-up; the
+  workers under ``SCHED_FIFO`` (``--rt-priority``, default 50) where the system
+  permits it (root, CAP_SYS_NICE or an rtprio limit), as a real-time deployment
+  runs, else the normal scheduler; the table says which. On a shared machine the
+  normal scheduler lets other processes delay a wake-up by milliseconds. Its
+  ``spin()`` is not used (it busy-waits and ignores SIGINT on this rclpy); workers
+  spin in bounded stretches.
+- Offline figures (2, 5, 6, 8) use no executor.
+
+Every graph runs on a private ROS domain (:func:`hasel.rosenv.private_domain`), so
+nothing else on the machine can disturb it. The machine's load average is recorded
+with each figure: on a shared machine, real-time figures depend on it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from hasel.errors import BadInputError
+
+__all__ = ["add_arguments", "run", "Row", "format_table", "FIGURES"]
+
+#: Figure numbers and what they measure (``--only`` takes the numbers).
+FIGURES = {1: "graph in simulated time", 2: "offline core loop", 3: "real time 200 Hz",
+           4: "scale", 5: "identification and recording", 6: "diagnosis blind check",
+           7: "200 Hz under load", 8: "loader fuzzing"}
+
+
+@dataclass
+class Row:
+    """One line of the table. ``ratio`` is value / baseline (None when there is no baseline)."""
+
+    figure: str
+    value: str
+    baseline: str = "-"
+    ratio: float | None = None
+    target: str = "-"
+    passed: bool | None = None
+
+
+def format_table(rows: list[Row]) -> str:
+    """The rows as a plain-text table (figure | value | baseline | ratio | target | pass)."""
+    head = ("figure", "value", "baseline", "ratio", "target", "pass")
+    cells = [head] + [(r.figure, r.value, r.baseline, "-" if r.ratio is None or not math.isfinite(r.ratio)
+                       else f"{r.ratio:.3g}", r.target,
+                       "-" if r.passed is None else ("yes" if r.passed else "NO")) for r in rows]
+    widths = [max(len(c[i]) for c in cells) for i in range(len(head))]
+    line = "-+-".join("-" * w for w in widths)
+    out = [" | ".join(c.ljust(w) for c, w in zip(cells[0], widths)), line]
+    out += [" | ".join(c.ljust(w) for c, w in zip(row, widths)) for row in cells[1:]]
+    return "\n".join(out)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of ``hasel bench``."""
+    p.add_argument("--quick", action="store_true", help="a smoke version (short runs, seconds per figure)")
+    p.add_argument("--json", metavar="FILE", default="out/bench.json", help="JSON output (default out/bench.json)")
+    p.add_argument("--only", metavar="N,N", default="",
+                   help="run only these figures: " + "; ".join(f"{k} {v}" for k, v in FIGURES.items()))
+    p.add_argument("--rt-priority", type=int, default=50, metavar="N",
+                   help="SCHED_FIFO priority of the real-time workers where the system permits it "
+                   "(default 50; 0: the normal scheduler)")
+    p.add_argument("--cache", metavar="DIR", default="out/bench_cache",
+                   help="where the campaign MCAP files live during the run (default out/bench_cache; removed after)")
+
+
+def _load() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return math.nan
+
+
+class _Bench:
+    """State of one run: options, progress, rows and JSON results."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.quick = bool(args.quick)
+        self.t0 = time.monotonic()
+        self.rows: list[Row] = []
+        self.results: dict[str, Any] = {}
+        self.cache = Path(args.cache)
+        self.out_dir = Path(args.json).parent
+        self.rt_priority = int(getattr(args, "rt_priority", 50))
+        from hasel.rosenv import private_domain
+
+        self.domain = private_domain()
+
+    def say(self, msg: str) -> None:
+        sys.stderr.write(f"hasel bench: {msg} ({time.monotonic() - self.t0:.0f} s)\n")
+        sys.stderr.flush()
+
+    def row(self, *a, **kw) -> None:
+        self.rows.append(Row(*a, **kw))
+
+
+# -- figures -------------------------------------------------------------------------------
+
+def _fig1(b: _Bench) -> None:
+    from hasel_sysid.bench_graph import graph_speed
+
+    dur, base_dur = (2.0, 0.5) if b.quick else (20.0, 2.0)
+    with tempfile.TemporaryDirectory(prefix="hasel-bench-") as tmp:
+        b.say(f"1: graph in simulated time, EventsExecutor, {dur:g} s simulated")
+        ev = graph_speed("events", dur, b.domain, tmp)
+        b.say(f"1: same graph, SingleThreadedExecutor, {base_dur:g} s simulated")
+        st = graph_speed("single", base_dur, b.domain, tmp)
+    b.results["1_graph_sim_time"] = {"events": ev, "single": st, "load_avg": _load(),
+                                     "msgs_per_tick": sum(ev["recorded"].values()) / max(ev["ticks"], 1)}
+    b.row("1 graph+recorder, sim time (sim s / wall s)", f"{ev['speed']:.1f}x (EventsExecutor)",
+          f"{st['speed']:.1f}x (SingleThreaded)", ev["speed"] / st["speed"], ">= 40x", ev["speed"] >= 40.0)
+    ok = ev["sim_time_ok"] and st["sim_time_ok"]
+    b.row("1 simulated time works (5 ms grid, all samples)", "yes" if ok else "NO", "-", None,
+          "both executors", ok)
+
+
+def _fig2(b: _Bench) -> None:
+    from hasel_sysid.bench_offline import core_vs_lsim
+
+    dur = 2.0 if b.quick else 20.0
+    b.say(f"2: offline core loop and lsim, {dur:g} s simulated")
+    r = core_vs_lsim(dur)
+    r["load_avg"] = _load()
+    b.results["2_core_loop"] = r
+    b.row("2 offline core closed loop (sim s / wall s)", f"{r['core_speed']:.0f}x",
+          f"{r['lsim_speed']:.0f}x (lsim of plant)", r["ratio"], ">= 1 (vs lsim)", r["ratio"] >= 1.0)
+
+
+def _rt_single(b: _Bench, duration_s: float, roles: str = "all") -> dict[str, Any]:
+    from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_layout
+
+    warm = 1.0 if b.quick else 2.0
+    kw = {"duration_s": duration_s, "warmup_s": warm, "domain_id": b.domain, "rt_priority": b.rt_priority}
+    if roles == "all":
+        specs = [WorkerSpec((0,), **kw)]
+    else:
+        specs = [WorkerSpec((0,), roles="plant", **kw), WorkerSpec((0,), roles="ctrl", **kw)]
+    res = run_layout(specs)
+    s = latency_summary([lp for r in res for lp in r["loops"]])
+    s["cpu_cores"] = sum(r["cpu_s"] for r in res) / max(res[0]["wall_s"], 1e-9)
+    s["duration_s"] = duration_s
+    s["load_avg"] = _load()
+    s["scheduler"] = res[0]["scheduler"]
+    return s
+
+
+def _sched(s: dict) -> str:
+    """Short name of the scheduler a real-time run used."""
+    return str(s.get("scheduler", "?")).split(" (")[0]
+
+
+def _lat(s: dict) -> str:
+    return f"{s['p50_us']:.0f}/{s['p99_us']:.0f}/{s['max_us']:.0f} us"
+
+
+def _fig3(b: _Bench) -> None:
+    dur, base = (5.0, 2.0) if b.quick else (60.0, 10.0)
+    b.say(f"3: one loop at 200 Hz in real time, one process, {dur:g} s")
+    one = _rt_single(b, dur)
+    b.say(f"3: the same loop split over two processes, {base:g} s")
+    split = _rt_single(b, base, roles="split")
+    b.results["3_realtime"] = {"one_process": one, "two_processes": split}
+    ratio = one["p99_us"] / split["p99_us"] if split["p99_us"] > 0 else math.nan
+    b.row(f"3 200 Hz latency p50/p99/max (1 process, {_sched(one)})", _lat(one), _lat(split) + " (2 proc)", ratio,
+          "p99 < 1000 us", one["p99_us"] < 1000.0)
+    b.row("3 200 Hz missed periods (1 process)", f"{one['missed']} of {one['expected_ticks']}",
+          f"{split['missed']} of {split['expected_ticks']} (2 proc)", None, "0", one["missed"] == 0)
+
+
+def _scale_point(b: _Bench, n: int, workers: int, duration_s: float) -> dict[str, Any]:
+    from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_layout
+
+    w = max(1, min(workers, n))
+    specs = [WorkerSpec(tuple(range(i, n, w)), duration_s=duration_s, warmup_s=1.0, slot=i, slots=w,
+                        domain_id=b.domain, rt_priority=b.rt_priority) for i in range(w)]
+    res = run_layout(specs)
+    s = latency_summary([lp for r in res for lp in r["loops"]])
+    wall = max(r["wall_s"] for r in res)
+    s.update(n=n, workers=w, cpu_cores=sum(r["cpu_s"] for r in res) / wall,
+             cpu_per_worker=[r["cpu_s"] / r["wall_s"] for r in res], load_avg=_load(),
+             scheduler=res[0]["scheduler"])
+    s["held"] = bool(s["missed_fraction"] < 1e-3 and s["worst_loop_p99_us"] < 2000.0)
+    return s
+
+
+def _fig4(b: _Bench) -> None:
+    counts = [1, 2, 4] if b.quick else [1, 2, 4, 8, 12, 16, 20, 24, 28, 32, 40, 48]
+    dur = 2.0 if b.quick else 8.0
+    curve = []
+    best = 0
+    for n in counts:
+        b.say(f"4: {n} loop(s) at 200 Hz in 2 worker processes, {dur:g} s")
+        s = _scale_point(b, n, 2, dur)
+        curve.append(s)
+        b.say(f"4:   p99 {s['p99_us']:.0f} us (worst loop {s['worst_loop_p99_us']:.0f}), missed "
+              f"{100 * s['missed_fraction']:.2f} %, CPU {s['cpu_cores']:.2f} cores -> "
+              f"{'held' if s['held'] else 'not held'}")
+        if not s["held"]:
+            break
+        best = n
+    one = None
+    if best >= 2:
+        b.say(f"4: {best} loops in one process (baseline layout), {dur:g} s")
+        one = _scale_point(b, best, 1, dur)
+    for s in curve + ([one] if one else []):
+        s.pop("cpu_per_worker", None)
+    b.results["4_scale"] = {"curve": curve, "one_process_at_best": one, "max_loops": best,
+                            "criteria": "missed < 0.1 % and every loop's p99 < 2 ms"}
+    base = "-" if one is None else (f"{best} in 1 proc: {'held' if one['held'] else 'not held'}, "
+                                    f"p99 {one['worst_loop_p99_us']:.0f} us")
+    b.row(f"4 loops holding 200 Hz (2 processes, {_sched(curve[0])})", str(best), base, None, ">= 32", best >= 32)
+    cpu = " ".join(f"{s['n']}:{s['cpu_cores']:.2f}" for s in curve)
+    per = [s["cpu_cores"] / s["n"] for s in curve if s["held"]]
+    b.row("4 CPU cores used by n loops (n:cores)", cpu, "-", None,
+          f"{100 * (sum(per) / len(per)):.1f} % core/loop" if per else "-", None)
+
+
+def _fig5(b: _Bench) -> None:
+    from hasel.io.bench import writer_overhead
+
+    from hasel_sysid.bench_graph import recorder_vs_bare
+    from hasel_sysid.bench_offline import CAMPAIGN_GAINS, ident_vs_load, write_campaign
+
+    b.cache.mkdir(parents=True, exist_ok=True)
+    paths = []
+    kw = {"duration_s": 2.0, "f0_hz": 0.5} if b.quick else {}
+    gen = []
+    try:
+        for k, gain in enumerate(CAMPAIGN_GAINS):
+            p = b.cache / f"campaign_actuator{k + 1}.mcap"
+            b.say(f"5: writing the campaign of actuator {k + 1} to {p}")
+            gen.append(write_campaign(p, gain, seed=k, **kw))
+            paths.append(p)
+        b.say("5: identification vs loading")
+        r = ident_vs_load(paths)
+    finally:
+        for p in paths:
+            p.unlink(missing_ok=True)
+        try:
+            b.cache.rmdir()
+        except OSError:
+            pass
+    b.say("5: recorder node vs bare mcap writer")
+    rec = recorder_vs_bare(4000 if b.quick else 20000, 3, b.domain)
+    b.say("5: MCAP writer vs bare mcap writer (zstd)")
+    wo = writer_overhead(4000 if b.quick else 20000, repeats=3)
+    b.results["5_ident_recording"] = {"campaign": gen, "identify_vs_load": r, "recorder_vs_bare": rec,
+                                      "writer_vs_bare": wo, "load_avg": _load()}
+    b.row("5 identify campaign from MCAP (CPU s)", f"{r['identify_cpu_s']:.2f} s",
+          f"{r['load_cpu_s']:.2f} s (load only)", r["ratio"], "< 2x", r["ratio"] < 2.0)
+    b.row("5 recorder node per message (no compression)", f"{rec['recorder_us']:.2f} us",
+          f"{rec['bare_us']:.2f} us (bare mcap)", rec["ratio"], "< 1.3x", rec["ratio"] < 1.3)
+    b.row("5 MCAP writer per message (zstd 3)", f"{wo['ours_us']:.2f} us", f"{wo['bare_us']:.2f} us (bare mcap)",
+          wo["ratio"], "< 1.3x", wo["ratio"] < 1.3)
+
+
+def _fig6(b: _Bench) -> None:
+    try:
+        from hasel.diagnose.blind import run_blind
+    except ImportError as err:
+        b.results["6_blind"] = {"available": False, "reason": str(err)}
+        b.row("6 diagnosis blind check", "not available", "-", None, "-", None)
+        return
+    n, quick = (4, True) if b.quick else (30, False)
+    b.say(f"6: diagnosis blind check, {n} cases, 2 workers")
+    s = run_blind(n, seed=0, workers=2, quick=quick, progress=lambda m: b.say("6: " + m.strip()))
+    cases = s.pop("cases", [])
+    s["wrong"] = [{"case": c["case"], "truth": c["truth"], "named": c["named"]} for c in cases if not c["correct"]]
+    s["load_avg"] = _load()
+    s["quick_cases"] = quick
+    b.results["6_blind"] = s
+
+    def pct(x):
+        return "n/a" if x is None else f"{100 * x:.0f} %"
+
+    top1 = s.get("top1_accuracy")
+    b.row("6 blind: top-1 (single/none)", f"{pct(top1)} of {s.get('n_single_or_none')}", "-", None, ">= 90 %",
+          None if top1 is None else top1 >= 0.9)
+    pair = s.get("pair_accuracy")
+    b.row("6 blind: right pair (two effects)", f"{pct(pair)} of {s.get('n_pairs')}", "-", None, "most (> 50 %)",
+          None if pair is None else pair > 0.5)
+    fa, n_none = s.get("false_alarms", 0), s.get("n_none", 0)
+    mi, n_eff = s.get("misses", 0), s.get("n_effect_cases", 0)
+    b.row("6 blind: false alarms / misses", f"{fa} of {n_none} / {mi} of {n_eff}", "-", None, "<= 1 in 20 each",
+          (n_none == 0 or fa / n_none <= 0.05) and (n_eff == 0 or mi / n_eff <= 0.05))
+    sh = s.get("median_shrink")
+    b.row("6 blind: median held-out shrink", pct(sh), "-", None, ">= 70 %", None if sh is None else sh >= 0.7)
+    spc = s.get("seconds_per_case")
+    b.row("6 blind: time per case", "n/a" if spc is None else f"{spc:.1f} s", "-", None, "-", None)
+
+
+def _fig7(b: _Bench) -> None:
+    from hasel_sysid.bench_rt import busy_loop_process
+
+    dur = 5.0 if b.quick else 60.0
+    unloaded = b.results.get("3_realtime", {}).get("one_process")
+    if unloaded is None or unloaded.get("duration_s") != dur:
+        b.say(f"7: one loop at 200 Hz without load, {dur:g} s")
+        unloaded = _rt_single(b, dur)
+    b.say(f"7: one loop at 200 Hz while a busy-loop process loads a core, {dur:g} s")
+    hog = busy_loop_process()
+    try:
+        loaded = _rt_single(b, dur)
+    finally:
+        hog.kill()
+        hog.wait()
+    b.results["7_under_load"] = {"loaded": loaded, "unloaded": unloaded, "load": "one busy-loop process"}
+    ratio = loaded["p99_us"] / unloaded["p99_us"] if unloaded["p99_us"] > 0 else math.nan
+    b.row(f"7 200 Hz + busy core: p50/p99/max ({_sched(loaded)})", _lat(loaded), _lat(unloaded) + " (no load)", ratio,
+          "p99 < 1000 us", loaded["p99_us"] < 1000.0)
+    b.row("7 200 Hz + busy core: missed periods", f"{loaded['missed']} of {loaded['expected_ticks']}",
+          f"{unloaded['missed']} of {unloaded['expected_ticks']} (no load)", None, "0", loaded["missed"] == 0)
+
+
+def _fig8(b: _Bench) -> None:
+    from hasel_sysid.bench_fuzz import run_fuzz
+
+    budget, timeout = (3.0, 5.0) if b.quick else (20.0, 10.0)
+    fail_dir = b.out_dir / "bench_fuzz_failures"
+    shutil.rmtree(fail_dir, ignore_errors=True)
+    b.say(f"8: fuzzing the loaders for {budget:g} s (per-case timeout {timeout:g} s)")
+    r = run_fuzz(budget, case_timeout_s=timeout, failures_dir=fail_dir, progress=b.say)
+    b.results["8_fuzz"] = r
+    kinds = ", ".join(f"{k} x{v}" for k, v in r["crashes_by_type"].items())
+    b.row("8 loader fuzzing: cases (ok/rejected)", f"{r['cases']} ({r['ok']}/{r['rejected']})", "-", None,
+          "no hang", not r["hangs"])
+    b.row("8 loader fuzzing: other exceptions", f"{r['crashed']}" + (f" ({kinds})" if kinds else ""), "-", None,
+          "0 (only DataFileError/BadInputError)", r["crashed"] == 0)
+    b.row("8 loader fuzzing: peak memory", f"{r['peak_rss_mib']:.0f} MiB (+{r['rss_growth_mib']:.0f})", "-", None,
+          f"< {r['mem_limit_mib']} MiB limit", 0 < r["peak_rss_mib"] < r["mem_limit_mib"])
+
+
+_RUNNERS: dict[int, Callable[[_Bench], None]] = {1: _fig1, 2: _fig2, 3: _fig3, 4: _fig4, 5: _fig5, 6: _fig6,
+                                                  7: _fig7, 8: _fig8}
+
+
+def _parse_only(text: str) -> list[int]:
+    if not text.strip():
+        return sorted(_RUNNERS)
+    try:
+        want = sorted({int(x) for x in text.split(",") if x.strip()})
+    except ValueError as err:
+        raise BadInputError(f"--only takes figure numbers like 1,3,5, got {text!r}") from err
+    bad = [n for n in want if n not in _RUNNERS]
+    if bad or not want:
+        raise BadInputError(f"--only: figures are {', '.join(map(str, _RUNNERS))}, got {text!r}")
+    return want
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
+        return _json_safe(obj.item())
+    return obj
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmarks; print the table; write the JSON. Exit 1 if a figure could not be measured."""
+    figures = _parse_only(args.only)
+    prio = getattr(args, "rt_priority", 50)
+    if not 0 <= prio <= 99:
+        raise BadInputError(f"--rt-priority must be 0 (off) or a SCHED_FIFO priority 1-99, got {prio}")
+    out = Path(args.json)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise BadInputError(f"cannot write {out}: {err.strerror or err}") from err
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    b = _Bench(args)
+    b.say(f"figures {','.join(map(str, figures))}{' (quick)' if b.quick else ''}, ROS domain {b.domain}, "
+          f"{os.cpu_count()} CPUs, load average {_load():.2f}")
+    errors = {}
+    for n in figures:
+        try:
+            _RUNNERS[n](b)
+        except Exception as err:  # noqa: BLE001 - one figure failing must not hide the others
+            import traceback
+
+            errors[n] = f"{type(err).__name__}: {err}\n{traceback.format_exc()}"
+            b.row(f"{n} {FIGURES[n]}", "FAILED", "-", None, "-", False)
+            b.say(f"{n}: failed: {type(err).__name__}: {err}")
+    table = format_table(b.rows)
+    print(table)
+    if b.quick:
+        print("(--quick: short runs to check that every figure works; the targets apply to the full run)")
+    doc = {"quick": b.quick, "figures": figures, "rt_priority": b.rt_priority, "wall_s": time.monotonic() - b.t0,
+           "cpus": os.cpu_count(), "domain_id": b.domain, "table": [asdict(r) for r in b.rows],
+           "results": b.results, "errors": errors}
+    with open(out, "w") as fh:
+        json.dump(_json_safe(doc), fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    b.say(f"wrote {out}")
+    return 1 if errors else 0

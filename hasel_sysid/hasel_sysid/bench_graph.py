@@ -1,0 +1,168 @@
+"""Measurements of the node graph for ``hasel bench``: simulated-time speed and the recorder's cost.
+
+- :func:`graph_speed`: the closed loop (plant, driver, filter, controller, amplifier,
+  reference) with the MCAP recorder, in one process, lockstep in simulated time
+  (:class:`~hasel_sysid.graph.NodeGraph`); simulated seconds per wall second. The
+  graph's in-memory collector (a test helper that keeps every message in lists) is
+  detached, so the graph measured is the one a recorded experiment needs. The
+  recording is then read back to check that simulated time worked: one amplifier
+  output per 5 ms tick, on the exact 5 ms grid, and every 10 kHz sample present.
+- :func:`recorder_vs_bare`: CPU time of the recorder node's message path (its raw
+  subscription callback: receive time from the node's clock, then
+  :class:`~hasel.io.writer.Ros2McapWriter`) against a bare ``mcap.writer.Writer``
+  writing the same serialised bytes with the same chunk size, both uncompressed.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hasel import paper
+
+__all__ = ["graph_speed", "recorder_vs_bare", "bench_messages"]
+
+_BATCH = "hasel_msgs/msg/SampleBatch"
+_STROKE = "hasel_msgs/msg/Stroke"
+
+
+def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str | os.PathLike[str],
+                seed: int = 0) -> dict[str, Any]:
+    """Run the recorded graph for ``duration_s`` simulated seconds with ``executor``.
+
+    Parameters
+    ----------
+    executor : {"events", "single"}
+        rclpy's EventsExecutor or SingleThreadedExecutor.
+    duration_s : float
+        Simulated time, s.
+    domain_id : int
+        ROS domain of the graph.
+    directory : path-like
+        Where the recording goes (deleted by the caller).
+
+    Returns
+    -------
+    dict
+        ``sim_s``, ``wall_s``, ``speed`` (simulated s per wall s), ``cpu_cores`` (process
+        CPU time per wall second, DDS threads included), ``recorded`` (messages per
+        topic), ``sim_time_ok`` and ``sim_time_detail``.
+    """
+    from hasel.io import info, load_signals
+    from hasel_sysid.graph import GraphConfig, NodeGraph
+    from hasel_sysid.recording import recorder_factory
+
+    path = Path(directory) / f"graph_{executor}.mcap"
+    seq = [2.0, 4.0, 6.0, 4.0, 2.0]
+    cfg = GraphConfig(sequence_mm=seq, hold_s=duration_s / len(seq), seed=seed, executor=executor,
+                      domain_id=domain_id)
+    with NodeGraph(cfg, extra_nodes=[recorder_factory(str(path))]) as g:
+        g.executor.remove_node(g.collector)
+        g.collector.destroy_node()
+        g.nodes.remove(g.collector)
+        g.wait_ready()
+        w0, c0 = time.perf_counter(), time.process_time()
+        g.run(duration_s, wall_timeout_s=600.0)
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        ticks = g.plant.sim.tick
+    rep = info(path)
+    recorded = {t.topic: int(t.count) for t in rep.topics if t.count}
+    sig = load_signals(path, ["/amp/applied.applied_kv", "/plant/batch.voltage_kv"])
+    t_app = sig["/amp/applied.applied_kv"].t_s
+    n_samples = sig["/plant/batch.voltage_kv"].values.size
+    steps = np.diff(t_app)
+    period = paper.LOOP_PERIOD_S
+    on_grid = bool(t_app.size and np.all(np.abs(t_app / period - np.round(t_app / period)) < 1e-6))
+    regular = bool(steps.size and np.all(np.abs(steps - period) < 1e-9))
+    want_samples = int(round(ticks * period * paper.PLANT_RATE_HZ))
+    ok = on_grid and regular and t_app.size >= ticks and n_samples == want_samples
+    detail = (f"{t_app.size} outputs for {ticks} ticks, on the 5 ms grid: {on_grid}, regular: {regular}; "
+              f"{n_samples} of {want_samples} 10 kHz samples")
+    return {"executor": executor, "sim_s": float(duration_s), "wall_s": wall, "speed": duration_s / wall,
+            "cpu_cores": cpu / wall, "ticks": int(ticks), "recorded": recorded, "sim_time_ok": ok,
+            "sim_time_detail": detail}
+
+
+def bench_messages(n: int, rng: np.random.Generator) -> list[tuple[str, bytes, int]]:
+    """``n`` serialised messages, half 50-sample SampleBatch, half Stroke: (topic, bytes, time ns)."""
+    from hasel.io import encode, encode_sample_batch
+
+    out = []
+    for i in range(n):
+        t = 10**9 + i * 2_500_000
+        if i % 2 == 0:
+            out.append(("/plant/batch", encode_sample_batch(t, 1e-4, rng.normal(size=50), rng.normal(size=50),
+                                                            rng.normal(size=50), rng.normal(size=50)), t))
+        else:
+            out.append(("/laser/stroke", encode(_STROKE, {"header": {"stamp": {"sec": t // 10**9,
+                                                                               "nanosec": t % 10**9}},
+                                                          "stroke_mm": float(rng.normal()), "source": 2}), t))
+    return out
+
+
+def recorder_vs_bare(n_messages: int = 20000, repeats: int = 3, domain_id: int = 0) -> dict[str, Any]:
+    """CPU time per message: the recorder node's path against a bare mcap writer (best of ``repeats``).
+
+    Returns
+    -------
+    dict
+        ``messages``, ``recorder_us``, ``bare_us`` (per message), ``ratio``,
+        ``recorder_bytes``, ``bare_bytes`` (file sizes).
+    """
+    import rclpy
+    from mcap.writer import CompressionType, Writer
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from hasel.io.msgdefs import message_definition
+    from hasel.io.writer import DEFAULT_CHUNK_SIZE
+    from hasel_sysid.recorder_node import RecorderNode
+
+    msgs = bench_messages(n_messages, np.random.default_rng(3))
+    defs = {t: message_definition(t).encode() for t in (_BATCH, _STROKE)}
+    ctx = Context()
+    rclpy.init(args=["--ros-args", "--log-level", "warn"], context=ctx, domain_id=domain_id)
+    best_rec = best_bare = float("inf")
+    sizes = [0, 0]
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            for r in range(repeats):
+                path = Path(tmp) / f"rec{r}.mcap"
+                node = RecorderNode(str(path), ["/plant/batch", "/laser/stroke"], context=ctx,
+                                    parameter_overrides=[Parameter("use_sim_time", value=False),
+                                                         Parameter("compression", value="none"),
+                                                         Parameter("chunk_size", value=DEFAULT_CHUNK_SIZE)])
+                cbs = {s.topic_name: s.callback for s in node.subscriptions if s.topic_name in
+                       ("/plant/batch", "/laser/stroke")}
+                calls = [(cbs[t], d) for t, d, _ in msgs]
+                c0 = time.process_time()
+                for cb, d in calls:
+                    cb(d)
+                node.destroy_node()  # closes the file: summary and footer
+                best_rec = min(best_rec, time.process_time() - c0)
+                sizes[0] = path.stat().st_size
+
+                bpath = Path(tmp) / f"bare{r}.mcap"
+                c0 = time.process_time()
+                with open(bpath, "wb") as fh:
+                    w = Writer(fh, chunk_size=DEFAULT_CHUNK_SIZE, compression=CompressionType.NONE)
+                    w.start("ros2", "bare")
+                    ids = {}
+                    for topic, tname in (("/plant/batch", _BATCH), ("/laser/stroke", _STROKE)):
+                        sid = w.register_schema(tname, "ros2msg", defs[tname])
+                        ids[topic] = w.register_channel(topic, "cdr", sid)
+                    for topic, d, t in msgs:
+                        now = time.time_ns()  # the recorder stamps arrival with its clock, so does this
+                        w.add_message(ids[topic], now, d, t)
+                    w.finish()
+                best_bare = min(best_bare, time.process_time() - c0)
+                sizes[1] = bpath.stat().st_size
+    finally:
+        rclpy.try_shutdown(context=ctx)
+    n = len(msgs)
+    return {"messages": n, "recorder_us": 1e6 * best_rec / n, "bare_us": 1e6 * best_bare / n,
+            "ratio": best_rec / best_bare, "recorder_bytes": sizes[0], "bare_bytes": sizes[1]}

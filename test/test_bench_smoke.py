@@ -1,0 +1,74 @@
+"""``hasel bench --quick``: the table and the JSON have every row and finite values (no timing asserted)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import pytest
+
+from hasel_sysid import bench
+from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_worker
+
+
+def _finite_numbers(obj, path="") -> list[str]:
+    """Paths of numbers in ``obj`` that are not finite (NaN became null in the JSON)."""
+    bad = []
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            bad += _finite_numbers(v, f"{path}.{k}")
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            bad += _finite_numbers(v, f"{path}[{i}]")
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        bad.append(path)
+    return bad
+
+
+def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
+    # capfd, not capsys: EventsExecutor() calls faulthandler.enable(), which needs a real stderr
+    out = tmp_path / "bench.json"
+    args = argparse.Namespace(quick=True, json=str(out), only="1,2,5,8", cache=str(tmp_path / "cache"))
+    assert bench.run(args) == 0
+    table = capfd.readouterr().out
+    doc = json.loads(out.read_text())
+    assert doc["errors"] == {} and doc["figures"] == [1, 2, 5, 8]
+    head = table.splitlines()[0]
+    assert [c.strip() for c in head.split("|")] == ["figure", "value", "baseline", "ratio", "target", "pass"]
+    figs = {r["figure"].split()[0] for r in doc["table"]}
+    assert figs == {"1", "2", "5", "8"}
+    for r in doc["table"]:
+        assert r["figure"] in table and r["value"] in table
+        assert r["ratio"] is None or (isinstance(r["ratio"], float) and r["ratio"] > 0)
+    res = doc["results"]
+    g = res["1_graph_sim_time"]
+    for ex in ("events", "single"):
+        assert g[ex]["speed"] > 0 and g[ex]["sim_time_ok"] is True
+    assert res["2_core_loop"]["max_abs_diff_mm"] < 1e-6  # lsim and the loop's plant agree
+    r5 = res["5_ident_recording"]
+    assert r5["identify_vs_load"]["files"] == 3 and r5["recorder_vs_bare"]["recorder_bytes"] > 0
+    assert not (tmp_path / "cache").exists()  # the campaign cache lives for the run only
+    f = res["8_fuzz"]
+    assert f["cases"] > 0 and f["cases"] == f["ok"] + f["rejected"] + f["crashed"] + len(f["hangs"])
+    nums = dict(res)
+    nums.pop("8_fuzz")  # crash details are text
+    assert _finite_numbers(nums) == []
+
+
+def test_realtime_worker_reports_every_tick_of_one_loop():
+    from hasel.rosenv import private_domain
+
+    r = run_worker(WorkerSpec((0,), duration_s=1.0, warmup_s=0.5, domain_id=private_domain()))
+    (loop,) = r["loops"]
+    assert loop["ns"] == "/rt0" and loop["expected"] == pytest.approx(200, abs=2)
+    s = latency_summary(r["loops"])
+    assert s["samples"] > 0 and s["samples"] + s["unanswered"] == s["ticks"]
+    for k in ("p50_us", "p99_us", "max_us"):
+        assert math.isfinite(s[k]) and s[k] > 0
+    assert s["p50_us"] <= s["p99_us"] <= s["max_us"]
+
+
+def test_only_rejects_unknown_figures(tmp_path):
+    args = argparse.Namespace(quick=True, json=str(tmp_path / "b.json"), only="9", cache=str(tmp_path))
+    with pytest.raises(bench.BadInputError, match="--only"):
+        bench.run(args)
