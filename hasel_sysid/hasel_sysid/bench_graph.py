@@ -27,6 +27,8 @@ from hasel import paper
 __all__ = ["graph_speed", "recorder_vs_bare", "bench_messages"]
 
 _BATCH = "hasel_msgs/msg/SampleBatch"
+_LOOP_TOPICS = ("/clock", "/sensor/timing", "/laser/stroke", "/strain/stroke", "/strain/stroke_filtered",
+                "/plant/batch", "/amp/command", "/amp/applied", "/controller/state")
 _STROKE = "hasel_msgs/msg/Stroke"
 
 
@@ -50,7 +52,9 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
     dict
         ``sim_s``, ``wall_s``, ``speed`` (simulated s per wall s), ``cpu_cores`` (process
         CPU time per wall second, DDS threads included), ``recorded`` (messages per
-        topic), ``sim_time_ok`` and ``sim_time_detail``.
+        topic), ``subscribers`` (per topic), ``callbacks_per_tick`` (deliveries plus
+        timers on the simulated clock), ``us_per_callback`` (wall time per tick divided
+        by them), ``sim_time_ok`` and ``sim_time_detail``.
     """
     from hasel.io import info, load_signals
     from hasel_sysid.graph import GraphConfig, NodeGraph
@@ -69,6 +73,8 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
         g.run(duration_s, wall_timeout_s=600.0)
         wall, cpu = time.perf_counter() - w0, time.process_time() - c0
         ticks = g.plant.sim.tick
+        subscribers = {t: g.plant.count_subscribers(t) for t in _LOOP_TOPICS}
+        timers = sum(1 for n in g.nodes for t in n.timers if t.clock.clock_type == t.clock.clock_type.ROS_TIME)
     rep = info(path)
     recorded = {t.topic: int(t.count) for t in rep.topics if t.count}
     sig = load_signals(path, ["/amp/applied.applied_kv", "/plant/batch.voltage_kv"])
@@ -82,9 +88,13 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
     ok = on_grid and regular and t_app.size >= ticks and n_samples == want_samples
     detail = (f"{t_app.size} outputs for {ticks} ticks, on the 5 ms grid: {on_grid}, regular: {regular}; "
               f"{n_samples} of {want_samples} 10 kHz samples")
+    # executor callbacks per tick: every delivery of every message, plus the timers on the simulated clock
+    deliveries = sum(recorded.get(t, 0) * n for t, n in subscribers.items()) / max(ticks, 1)
+    per_tick = deliveries + timers
     return {"executor": executor, "sim_s": float(duration_s), "wall_s": wall, "speed": duration_s / wall,
-            "cpu_cores": cpu / wall, "ticks": int(ticks), "recorded": recorded, "sim_time_ok": ok,
-            "sim_time_detail": detail}
+            "cpu_cores": cpu / wall, "ticks": int(ticks), "recorded": recorded, "subscribers": subscribers,
+            "callbacks_per_tick": per_tick, "us_per_callback": 1e6 * wall / max(ticks, 1) / per_tick,
+            "sim_time_ok": ok, "sim_time_detail": detail}
 
 
 def bench_messages(n: int, rng: np.random.Generator) -> list[tuple[str, bytes, int]]:
