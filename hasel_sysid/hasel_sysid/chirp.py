@@ -103,7 +103,8 @@ def run_chirp(schedule: Schedule, out: str, *, seed: int = 0, plant: str = "nomi
         holder.append(node)
         return node
 
-    cfg = GraphConfig(seed=seed, variant=plant, actuator=actuator, with_controller=False, with_reference=False)
+    cfg = GraphConfig(seed=seed, variant=plant, actuator=actuator, with_controller=False, with_reference=False,
+                      with_collector=False)  # everything goes to the recording
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     with NodeGraph(cfg, extra_nodes=[make_experiment, recorder_factory(out)]) as g:
         holder[0].publish_markers(excitation, amplitude_kv, f0, f1, duration)

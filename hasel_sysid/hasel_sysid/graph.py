@@ -67,6 +67,7 @@ class GraphConfig:
     plant_params: dict = field(default_factory=dict)
     with_reference: bool = True
     with_controller: bool = True
+    with_collector: bool = True  # keep the signals in memory (experiments that only record need not)
     executor: str = "events"
     domain_id: int | None = None  # None: a private domain claimed for this process
 
@@ -145,8 +146,10 @@ class NodeGraph:
                     {"sequence_mm": [float(x) for x in cfg.sequence_mm], "hold_s": float(cfg.hold_s),
                      "start_s": 0.0}))
                 self.nodes.append(self.reference)
-            self.collector = Collector(**kw, parameter_overrides=params({}))
-            self.nodes.append(self.collector)
+            self.collector = None
+            if cfg.with_collector:
+                self.collector = Collector(**kw, parameter_overrides=params({}))
+                self.nodes.append(self.collector)
             self.nodes += [make(self.context) for make in extra_nodes]
             self.executor = make_executor(cfg.executor, self.context)
             for n in self.nodes:

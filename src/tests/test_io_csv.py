@@ -139,3 +139,13 @@ def test_matlab_round_trip_and_bad_files(tmp_path, rng):
     (tmp_path / "h.mat").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\x00" * 600)
     with pytest.raises(DataFileError, match=r"h\.mat"):
         load_io(tmp_path / "h.mat", time="t", input="u", output="y")
+
+
+def test_binary_garbage_is_a_data_file_error(tmp_path):
+    from hasel.errors import DataFileError
+    from hasel.io import load_io
+
+    p = tmp_path / "garbage.csv"
+    p.write_bytes(b"t_s,voltage_kv,stroke_mm\n0,1,2\n\xff\xfe\x00\x81,2,3\n")
+    with pytest.raises(DataFileError, match="UTF-8"):
+        load_io(p)

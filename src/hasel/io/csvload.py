@@ -156,11 +156,14 @@ def read_csv_table(path: str | os.PathLike[str], columns: Sequence[str]) -> Tabl
         If the file cannot be read, or a requested column has an empty or non-numeric cell.
     """
     p = Path(path)
-    delim, names, header, skip = _sniff(p)
-    probe = Table(p, names, header, {})
-    wanted = list(dict.fromkeys(n for n in (probe.resolve(c) for c in columns) if n is not None))
-    idx = [names.index(n) for n in wanted]
-    values = _parse_columns(p, delim, skip, idx, wanted)
+    try:
+        delim, names, header, skip = _sniff(p)
+        probe = Table(p, names, header, {})
+        wanted = list(dict.fromkeys(n for n in (probe.resolve(c) for c in columns) if n is not None))
+        idx = [names.index(n) for n in wanted]
+        values = _parse_columns(p, delim, skip, idx, wanted)
+    except UnicodeDecodeError as err:
+        raise DataFileError(f"{p}: not a text (UTF-8) CSV file: undecodable byte at offset {err.start}") from None
     probe._columns = dict(zip(wanted, values))
     return probe
 
@@ -168,11 +171,14 @@ def read_csv_table(path: str | os.PathLike[str], columns: Sequence[str]) -> Tabl
 def first_value(path: str | os.PathLike[str], name: str) -> float | None:
     """The first non-empty value of column ``name`` of a CSV file (e.g. a ``Ts`` given once)."""
     p = Path(path)
-    delim, names, _header, skip = _sniff(p)
+    try:
+        delim, names, _header, skip = _sniff(p)
+    except UnicodeDecodeError:
+        return None
     if name not in names:
         return None
     i = names.index(name)
-    with open(p, encoding="utf-8-sig", newline="") as f:
+    with open(p, encoding="utf-8-sig", errors="replace", newline="") as f:
         rows = csv.reader(f, delimiter=delim) if delim else (line.split() for line in f)
         for lineno, row in enumerate(rows, start=1):
             if lineno <= skip or i >= len(row) or not row[i].strip():
