@@ -35,6 +35,7 @@ parameters, a small grid plus bounded refinement otherwise).
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -45,18 +46,25 @@ from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s
 from hasel.effects.operators import asymmetric_lag, play, scale_resonances
 
 __all__ = ["EffectFit", "Pipeline", "fit_family", "joint_refine", "family_bounds", "FAMILIES", "HYST_THRESHOLDS",
-           "describe_params"]
+           "describe_params", "LINEAR", "INPUT_SIDE", "make_linear", "split_linear"]
 
 #: Effect names in chain order of their (first) slot.
 FAMILIES = ("time_delay", "saturation", "static_nonlinearity", "hysteresis", "load_mass",
             "asymmetric_dynamics", "charge_drift", "sensor_nonlinearity")
-#: Degree of the static map's polynomial (offset and linear terms included).
+#: Highest degree of the static and sensor maps' polynomials (offset and linear terms included;
+#: 1, 3 or this, chosen by cross-validation within the training samples).
 STATIC_DEGREE = 5
+#: Ridge of the polynomial maps' least squares, relative to the mean squared column norm.
+POLY_RIDGE = 1e-4
 #: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
 HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
 # stages whose presence downstream keeps a least-squares basis exact
-_LINEAR_STAGES = {"time_delay", "load_mass"}
-_SLOT = {"time_delay": 0, "saturation:input": 1, "static_nonlinearity:input": 2, "hysteresis": 3,
+_LINEAR_STAGES = {"time_delay", "load_mass", "_linear"}
+#: Name of the pseudo-effect holding a re-identified linear model (not an effect: never named).
+LINEAR = "_linear"
+#: Families acting before the linear model (a linear model can be re-identified through them).
+INPUT_SIDE = ("time_delay", "saturation", "static_nonlinearity", "hysteresis")
+_SLOT = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "static_nonlinearity:input": 2, "hysteresis": 3,
          "load_mass": 4, "static_nonlinearity:internal": 5, "asymmetric_dynamics": 6, "charge_drift": 7,
          "saturation:output": 8, "sensor_nonlinearity": 9}
 
@@ -81,8 +89,8 @@ class EffectFit:
 
     @property
     def n_params(self) -> int:
-        """Number of fitted parameters (what the penalty counts)."""
-        return len(self.theta)
+        """Number of fitted parameters (what the penalty counts; a re-identified nominal counts none)."""
+        return 0 if self.name == LINEAR else len(self.theta)
 
     @property
     def slot(self) -> int:
@@ -101,11 +109,14 @@ class Pipeline:
         Working-rate data.
     num, den : ndarray
         Nominal model (descending powers of s).
+    delay_s : float
+        The nominal model's own input delay, s (MODEL.json ``delay_s``).
     """
 
     prep: Prepared
     num: np.ndarray
     den: np.ndarray
+    delay_s: float = 0.0
     _cache: dict = field(default_factory=dict)
     _lin: dict = field(default_factory=dict)
 
@@ -113,17 +124,22 @@ class Pipeline:
         self.num = np.asarray(self.num, float)
         self.den = np.asarray(self.den, float)
         self.nominal = LinearSim(self.num, self.den, self.prep.rate_hz)
-        self.t_dom = min(dominant_time_constant_s(self.den), self.span_s)
+        self.inputs = [(_shift(r.t_s, r.u, self.delay_s) if self.delay_s > 0 else r.u) for r in self.prep.records]
+        self.t_dom = max(min(dominant_time_constant_s(self.den), self.span_s), 2.0 * self.prep.dt_s)
+        # maps are normalised on the training samples: [-1, 1] spans their 0.5-99.5 percentiles,
+        # and a polynomial map is held constant beyond (never extrapolated)
         u = self.prep.stacked("u")
-        lo, hi = np.percentile(u, [1, 99])
+        u_tr = self.prep.stacked("u", "train")
+        lo, hi = np.percentile(u_tr, [0.5, 99.5])
         self.u_c = 0.5 * (lo + hi)
         self.u_s = max(0.5 * (hi - lo), 1e-12 * max(1.0, abs(self.u_c)), 1e-300)
-        y0 = np.concatenate([self.nominal.run(r.u) for r in self.prep.records])
-        lo, hi = np.percentile(y0, [1, 99])
+        y0 = np.concatenate([self.nominal.run(x)[r.train] for x, r in zip(self.inputs, self.prep.records)])
+        lo, hi = np.percentile(y0, [0.5, 99.5])
         self.y_c = 0.5 * (lo + hi)
         self.y_s = max(0.5 * (hi - lo), 1e-300)
         self.thresholds = tuple(2.0 * self.u_s * f for f in HYST_THRESHOLDS)
         self.n_evals = 0
+        self.max_degree = _max_degree(u, self.u_s)
 
     @property
     def span_s(self) -> float:
@@ -132,15 +148,17 @@ class Pipeline:
         return float(r.t_s[-1] - r.t_s[0] + self.prep.dt_s)
 
     # -- linear model with load --------------------------------------------------------------
-    def loaded(self, mu: float, kappa: float = 1.0) -> LinearSim:
-        """The model with ``1 + mu`` times the inertia of its resonances (cached), gain ``kappa``."""
-        key = round(mu, 12)
+    def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None) -> LinearSim:
+        """The model (``lin``, a re-identified linear part, or the nominal) with ``1 + mu`` times
+        the inertia of its resonances (cached), times the gain ``kappa``."""
+        base = ("nominal",) if lin is None else lin.theta
+        key = (round(mu, 12),) + base
         sim = self._lin.get(key)
         if sim is None:
+            num, den = (self.num, self.den) if lin is None else split_linear(lin)
             if mu == 0.0:
-                sim = self.nominal
+                sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz)
             else:
-                den = self.den
                 p = np.roots(den)
                 if np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))):
                     den2 = scale_resonances(den, 1.0 + mu)
@@ -151,13 +169,19 @@ class Pipeline:
                     p2[i] = p[i] / (1.0 + mu)
                     den2 = np.real(np.poly(p2)) * den[0]
                     den2 = den2 * (den[-1] / den2[-1])
-                sim = LinearSim(self.num, den2, self.prep.rate_hz)
+                sim = LinearSim(num, den2, self.prep.rate_hz)
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim
         if kappa == 1.0:
             return sim
         return _Scaled(sim, kappa)  # type: ignore[return-value]
+
+    def linear_of(self, effects: dict[str, "EffectFit"]) -> "LinearSim | _Scaled":
+        """The linear part of the chain for ``effects`` (re-identified model and load included)."""
+        f = effects.get("load_mass")
+        mu, kappa = (f.theta if f is not None else (0.0, 1.0))
+        return self.loaded(mu, kappa, effects.get(LINEAR))
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -184,7 +208,7 @@ class Pipeline:
         e = {k: v for k, v in effects.items() if v.slot < upto}
         out: dict[str, np.ndarray] = {}
         key: tuple = ()
-        x = rec.u
+        x = self.inputs[ri]
         f = e.get("time_delay")
         if f is not None:
             key += ("d",) + f.theta
@@ -199,7 +223,7 @@ class Pipeline:
         if f is not None and f.variant == "input":
             key += ("mi",) + f.theta
             z = (x - self.u_c) / self.u_s
-            x = x + self.u_s * np.polyval(f.theta[::-1], z)
+            x = x + self.u_s * poly_map(f.theta, z)
         out["x_map"] = x
         f = e.get("hysteresis")
         if f is not None:
@@ -210,14 +234,15 @@ class Pipeline:
         out["x_eff"] = x
         f = e.get("load_mass")
         mu, kappa = (f.theta if f is not None else (0.0, 1.0))
-        key += ("l", mu, kappa)
-        sim = self.loaded(mu, kappa)
+        lin = e.get(LINEAR)
+        key += ("l", mu, kappa) + (lin.theta if lin is not None else ())
+        sim = self.loaded(mu, kappa, lin)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         out["y_lin"] = y
         f = e.get("static_nonlinearity")
         if f is not None and f.variant == "internal":
             w = (y - self.y_c) / self.y_s
-            y = y + self.unit(sim).run(self.y_s * np.polyval(f.theta[::-1], w))
+            y = y + self.unit(sim).run(self.y_s * poly_map(f.theta, w))
         out["y_int"] = y
         f = e.get("asymmetric_dynamics")
         if f is not None:
@@ -235,7 +260,7 @@ class Pipeline:
         f = e.get("sensor_nonlinearity")
         if f is not None:
             w = (y - self.y_c) / self.y_s
-            y = y + self.y_s * np.polyval(f.theta[::-1], w)
+            y = y + self.y_s * poly_map(f.theta, w)
         out["y"] = y
         self.n_evals += 1
         return out
@@ -246,10 +271,23 @@ class Pipeline:
         return _Scaled(sim, 1.0 / g) if abs(g) > 1e-12 else sim
 
     def charge(self, x: np.ndarray, tau_s: float) -> np.ndarray:
-        """Slow low-pass (``tau_s``) of the input from zero (nothing stored when the log starts), over the input's scale."""
-        a = -math.expm1(-self.prep.dt_s / tau_s)
-        q = signal.lfilter([a], [1.0, a - 1.0], x)
-        return q / self.u_s
+        """Slow history of the input: a first-order low-pass (``tau_s``) from zero (nothing
+        stored when the log starts), of the input pre-smoothed by two first-order stages of
+        a tenth of the shortest drift time constant (so that no fast part of the input, which
+        a plain low-pass passes with a 90 degree lag, leaks in), over the input's scale."""
+        key = ("charge", hashlib.blake2b(np.ascontiguousarray(x).tobytes(), digest_size=16).digest(), tau_s)
+        cached = self._cache.get(key)
+        if cached is not None:
+            return cached
+        dt = self.prep.dt_s
+        ts = 0.1 * _tau_min(self)
+        b = -math.expm1(-dt / ts)
+        xs = signal.lfilter([b], [1.0, b - 1.0], x)
+        xs = signal.lfilter([b], [1.0, b - 1.0], xs)
+        a = -math.expm1(-dt / tau_s)
+        q = signal.lfilter([a], [1.0, a - 1.0], xs) / self.u_s
+        self._cache[key] = q
+        return q
 
     def simulate(self, effects: dict[str, EffectFit], ri: int) -> np.ndarray:
         """Output of record ``ri`` for the nominal model plus ``effects``."""
@@ -263,6 +301,51 @@ class Pipeline:
             if m.any():
                 parts.append((rec.y - self.simulate(effects, ri))[m])
         return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def monomial(z: np.ndarray, j: int, lim: float = 1.0) -> np.ndarray:
+    """``z**j`` on ``[-lim, lim]``, held constant outside.
+
+    The maps are normalised so that ``[-1, 1]`` holds the training data (0.5-99.5
+    percentiles); a polynomial continued beyond (even along its tangent) would swing
+    wildly, so a map's deviation from the nominal stays at its value at the edge of the
+    data it was fitted on.
+    """
+    z = np.asarray(z, float)
+    if j == 0:
+        return np.ones_like(z)
+    return np.clip(z, -lim, lim) ** j
+
+
+def monomials(z: np.ndarray, n: int, lim: float = 1.0) -> list[np.ndarray]:
+    """``[monomial(z, j) for j in range(n)]``, by repeated products."""
+    zc = np.clip(np.asarray(z, float), -lim, lim)
+    out = [np.ones_like(zc)]
+    for _ in range(1, n):
+        out.append(out[-1] * zc)
+    return out
+
+
+def poly_map(theta, z: np.ndarray, lim: float = 1.0) -> np.ndarray:
+    """``sum_j theta[j] * monomial(z, j)`` (Horner)."""
+    zc = np.clip(np.asarray(z, float), -lim, lim)
+    acc = np.full_like(zc, float(theta[-1]))
+    for c in list(theta)[-2::-1]:
+        acc = acc * zc + float(c)
+    return acc
+
+
+def make_linear(num: np.ndarray, den: np.ndarray) -> EffectFit:
+    """A re-identified linear model as the pseudo-effect :data:`LINEAR`."""
+    num = np.atleast_1d(np.asarray(num, float))
+    den = np.atleast_1d(np.asarray(den, float))
+    return EffectFit(LINEAR, "model", (float(num.size),) + tuple(map(float, num)) + tuple(map(float, den)))
+
+
+def split_linear(fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+    """``(num, den)`` of a :data:`LINEAR` pseudo-effect."""
+    k = int(fit.theta[0])
+    return np.asarray(fit.theta[1:1 + k]), np.asarray(fit.theta[1 + k:])
 
 
 class _Scaled:
@@ -328,9 +411,14 @@ def _downstream_nonlinear(effects: dict[str, EffectFit], slot: int) -> bool:
     return any(f.slot > slot and f.name not in _LINEAR_STAGES for f in effects.values())
 
 
+def sumsq(x: np.ndarray) -> float:
+    """``x @ x`` without BLAS: a threaded dot product of a long vector can stall for
+    milliseconds on a busy machine, and the fits call this thousands of times."""
+    return float(np.einsum("i,i->", x, x))
+
+
 def _sse(pipe: Pipeline, effects: dict[str, EffectFit]) -> float:
-    r = pipe.residuals(effects, "train")
-    return float(r @ r)
+    return sumsq(pipe.residuals(effects, "train"))
 
 
 def _with(effects: dict[str, EffectFit], fit: EffectFit) -> dict[str, EffectFit]:
@@ -355,8 +443,25 @@ def _refine(pipe: Pipeline, effects: dict[str, EffectFit], fit: EffectFit, lo, h
     return cand if 2.0 * res.cost <= _sse(pipe, _with(effects, fit)) else fit
 
 
-def _ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, nonneg: bool = False) -> np.ndarray:
-    """Least-squares weights of basis responses (per record) against the current training residual."""
+def _train_smooth(x: np.ndarray, m: np.ndarray, n: int) -> np.ndarray:
+    """Moving average of ``x`` over ``n`` samples using training samples (``m``) only."""
+    def box(v: np.ndarray) -> np.ndarray:
+        c = np.concatenate([[0.0], np.cumsum(v)])
+        i = np.arange(v.size)
+        lo = np.clip(i - n // 2, 0, v.size)
+        hi = np.clip(i - n // 2 + n, 0, v.size)
+        return c[hi] - c[lo]
+
+    return box(np.where(m, x, 0.0)) / np.maximum(box(m.astype(float)), 1.0)
+
+
+def _ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, nonneg: bool = False,
+        smooth: int = 0) -> np.ndarray:
+    """Least-squares weights of basis responses (per record) against the current training residual.
+
+    ``smooth > 1`` fits the moving averages (over that many samples, training samples only)
+    of the basis and the residual: only their slow parts decide the weights.
+    """
     cols, rhs = [], []
     for ri, rec in enumerate(pipe.prep.records):
         m = rec.train
@@ -364,8 +469,12 @@ def _ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, nonneg: bool = 
             continue
         st = pipe.stages(effects, ri)
         B = basis_fn(ri, st)
+        r = rec.y - st["y"]
+        if smooth > 1:
+            B = [_train_smooth(b, m, smooth) for b in B]
+            r = _train_smooth(r, m, smooth)
         cols.append(np.column_stack(B)[m])
-        rhs.append((rec.y - st["y"])[m])
+        rhs.append(r[m])
     A = np.vstack(cols)
     b = np.concatenate(rhs)
     scale = np.sqrt(np.sum(A * A, axis=0))
@@ -420,23 +529,96 @@ def _fit_saturation(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit 
     return best
 
 
+def _max_degree(u: np.ndarray, u_s: float) -> int:
+    """Highest polynomial degree of a static map that the input's levels can identify.
+
+    A static map is identified from the levels the input holds; when the input is a
+    staircase (held most of the time), a polynomial through its ``L`` distinct held levels
+    has at most degree ``L - 1`` (two levels, a single step: an affine map). Otherwise
+    (a continuously varying input) :data:`STATIC_DEGREE`.
+    """
+    du = np.abs(np.diff(u))
+    held = du <= 1e-9 * max(u_s, 1e-300)
+    if held.mean() < 0.8:
+        return STATIC_DEGREE
+    levels = np.unique(np.round(u[1:][held] / (0.01 * 2 * u_s)))
+    return int(max(1, min(STATIC_DEGREE, levels.size - 1)))
+
+
+def _train_halves(rec) -> tuple[np.ndarray, np.ndarray]:
+    """The training samples of a record split in two by alternating its contiguous runs."""
+    m = rec.train
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(int), [0]])))
+    a = np.zeros(m.size, bool)
+    for i, (s0, s1) in enumerate(zip(edges[::2], edges[1::2])):
+        if i % 2 == 0:
+            a[s0:s1] = True
+    return a, m & ~a
+
+
+def _poly_ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, degrees=(1, 3, STATIC_DEGREE)) -> np.ndarray:
+    """Least-squares polynomial weights with the degree chosen by two-fold cross-validation
+    within the training samples (a high degree fitted where the data hold few levels, e.g.
+    a single step, would swing wildly in between)."""
+    cols, rhs, half = [], [], []
+    for ri, rec in enumerate(pipe.prep.records):
+        if not rec.train.any():
+            continue
+        st = pipe.stages(effects, ri)
+        B = np.column_stack(basis_fn(ri, st))
+        a, b = _train_halves(rec)
+        m = rec.train
+        cols.append(B[m])
+        rhs.append((rec.y - st["y"])[m])
+        half.append(a[m])
+    A = np.vstack(cols)
+    r = np.concatenate(rhs)
+    ha = np.concatenate(half)
+    scale = np.sqrt(np.sum(A * A, axis=0))
+    scale[scale == 0] = 1.0
+    An = A / scale
+
+    def solve(cols_: slice, rows: np.ndarray) -> np.ndarray:
+        # a little ridge on the unit-norm columns: monomials of high degree are nearly
+        # collinear, and unregularised they trade huge coefficients of opposite signs
+        M = An[rows][:, cols_]
+        k = M.shape[1]
+        lam = POLY_RIDGE * float(np.trace(M.T @ M)) / k
+        return np.linalg.solve(M.T @ M + lam * np.eye(k), M.T @ r[rows])
+
+    # two held levels (a step) cannot tell an affine map from a gain change of the linear
+    # part: the map keeps only its offset then (a gain change is the load family's)
+    degrees = tuple(d for d in degrees if d <= pipe.max_degree) if pipe.max_degree > 1 else (0,)
+    best_d, best_cv = degrees[-1], np.inf
+    if ha.any() and (~ha).any():
+        for d in degrees:
+            c = slice(0, d + 1)
+            cv = 0.0
+            for tr, te in ((ha, ~ha), (~ha, ha)):
+                e = r[te] - An[te][:, c] @ solve(c, tr)
+                cv += sumsq(e)
+            if cv < best_cv * (1 - 1e-3):
+                best_d, best_cv = d, cv
+    c = slice(0, best_d + 1)
+    return solve(c, np.ones(r.size, bool)) / scale[c]
+
+
 def _fit_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
     best, best_cost = None, np.inf
     for variant in ("input", "internal"):
         slot = _SLOT[f"static_nonlinearity:{variant}"]
 
         def basis(ri, st, variant=variant):
-            f = effects.get("load_mass")
-            sim = pipe.loaded(*(f.theta if f else (0.0, 1.0)))
+            sim = pipe.linear_of(effects)
             if variant == "input":
                 z = (st["x_map"] - pipe.u_c) / pipe.u_s
-                return [sim.run(pipe.u_s * z ** j) for j in range(STATIC_DEGREE + 1)]
+                return [sim.run(pipe.u_s * m) for m in monomials(z, STATIC_DEGREE + 1)]
             w = (st["y_lin"] - pipe.y_c) / pipe.y_s
             g1 = pipe.unit(sim)
-            return [g1.run(pipe.y_s * w ** j) for j in range(STATIC_DEGREE + 1)]
+            return [g1.run(pipe.y_s * m) for m in monomials(w, STATIC_DEGREE + 1)]
 
         base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
-        th = _ls(pipe, base, basis)
+        th = _poly_ls(pipe, base, basis)
         fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
         if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
             fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
@@ -449,16 +631,15 @@ def _fit_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | No
 def _fit_sensor(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
     def basis(ri, st):
         w = (st["y_sat"] - pipe.y_c) / pipe.y_s
-        return [pipe.y_s * w ** j for j in range(STATIC_DEGREE + 1)]
+        return [pipe.y_s * m for m in monomials(w, STATIC_DEGREE + 1)]
 
-    th = _ls(pipe, effects, basis)
+    th = _poly_ls(pipe, effects, basis)
     return EffectFit("sensor_nonlinearity", "output", tuple(map(float, th)))
 
 
 def _fit_hysteresis(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
     def basis(ri, st):
-        f = effects.get("load_mass")
-        sim = pipe.loaded(*(f.theta if f else (0.0, 1.0)))
+        sim = pipe.linear_of(effects)
         x = st["x_map"]
         key = ("hfit",) + tuple(sorted((k, v.variant, v.theta) for k, v in effects.items() if v.slot < 3))
         ps = pipe.plays(ri, x, key)
@@ -483,7 +664,7 @@ def _fit_load(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None
                 cols.append(st["y_lin"][rec.train])
                 rhs.append((rec.y - st["y"] + st["y_lin"])[rec.train])
         a, b = np.concatenate(cols), np.concatenate(rhs)
-        kappa = float(np.clip(a @ b / max(a @ a, 1e-300), 0.05, 20.0))
+        kappa = float(np.clip(np.einsum("i,i->", a, b) / max(sumsq(a), 1e-300), 0.05, 20.0))
         fit = EffectFit("load_mass", "model", (mu, kappa))
         c = _sse(pipe, _with(effects, fit))
         if c < best_cost:
@@ -515,13 +696,18 @@ def _fit_drift(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | Non
     taus = span * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0])
     taus = np.unique(np.clip(taus, tau_min, None))
 
+    # drift is slow: its weights are fitted on slow parts only, else its low-pass (a 90 degree
+    # lag at any fast frequency) could pose as the quadrature part of a hysteresis loop
+    n_min = min(r.u.size for r in pipe.prep.records)
+    smooth = int(min(max(10.0 * pipe.t_dom, 0.25 * tau_min) * pipe.prep.rate_hz, n_min / 4))
+
     def ls_at(tau: float) -> EffectFit:
         def basis(ri, st):
             q = pipe.charge(st["x_sat"], tau)
             return [st["y_asym"] * q, pipe.y_s * q]
 
         base = {k: v for k, v in effects.items() if k != "charge_drift"}
-        g, o = _ls(pipe, base, basis)
+        g, o = _ls(pipe, base, basis, smooth=smooth)
         return EffectFit("charge_drift", "output", (float(tau), float(g), float(o)))
 
     best = min((ls_at(float(t)) for t in taus), key=lambda f: _sse(pipe, _with(effects, f)))
@@ -532,10 +718,7 @@ def _fit_drift(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | Non
     cand = ls_at(math.exp(float(res.x)))
     if _sse(pipe, _with(effects, cand)) < _sse(pipe, _with(effects, best)):
         best = cand
-    if _downstream_nonlinear(effects, 7):
-        best = _refine(pipe, effects, best, np.array([tau_min, -np.inf, -np.inf]), np.array([10 * span, np.inf, np.inf]),
-                       max_nfev=20)
-    return best
+    return best  # no refinement on the full residual: that would undo the slow-only fit
 
 
 def family_bounds(pipe: Pipeline, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
@@ -560,6 +743,11 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
     """All parameters of ``effects`` refined together on the training samples (variants kept)."""
     if not effects:
         return effects
+    # the drift's weights stay as fitted on slow parts (see _fit_drift)
+    fixed = {k: v for k, v in effects.items() if k in (LINEAR, "charge_drift")}
+    effects = {k: v for k, v in effects.items() if k not in fixed}
+    if not effects:
+        return fixed
     names = list(effects)
     sizes = [effects[k].n_params for k in names]
     x0 = np.concatenate([np.asarray(effects[k].theta, float) for k in names])
@@ -569,7 +757,7 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
     x0 = np.clip(x0, lo, hi)
 
     def build(x: np.ndarray) -> dict[str, EffectFit]:
-        out, i = {}, 0
+        out, i = dict(fixed), 0
         for k, m in zip(names, sizes):
             out[k] = EffectFit(k, effects[k].variant, tuple(map(float, x[i:i + m])))
             i += m
@@ -580,8 +768,8 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
         res = optimize.least_squares(lambda x: pipe.residuals(build(x), "train"), x0, bounds=(lo, hi),
                                      method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3)
     except (ValueError, np.linalg.LinAlgError):
-        return effects
-    return build(res.x) if 2.0 * res.cost < base_cost else effects
+        return {**effects, **fixed}
+    return build(res.x) if 2.0 * res.cost < base_cost else {**effects, **fixed}
 
 
 def _delay_max(pipe: Pipeline) -> float:
@@ -615,8 +803,12 @@ def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str) -> Effe
         return None
 
 
-def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = ("", "")) -> dict:
-    """The fitted parameters of ``fit`` in physical terms (JSON-ready)."""
+def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = ("", ""),
+                    effects: dict[str, EffectFit] | None = None) -> dict:
+    """The fitted parameters of ``fit`` in physical terms (JSON-ready).
+
+    ``effects`` (the whole augmented set) lets a static map's offset be given in output
+    units through the linear part's static gain."""
     ui, uo = units
     th = fit.theta
     out: dict = {"variant": fit.variant}
@@ -641,11 +833,12 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
                                          "y + s*sum_j c_j w^j, w = (y - c)/s")}
         xs = np.linspace(c - s, c + s, 9)
         z = (xs - c) / s
-        if fit.name == "static_nonlinearity":
-            dev = s * np.polyval(list(th)[::-1], z)
-        else:
-            dev = s * np.polyval(list(th)[::-1], z)
+        dev = s * poly_map(th, z)
         out["curve"] = {"at": xs.tolist(), "deviation": dev.tolist()}
+        if fit.name == "static_nonlinearity":
+            g0 = pipe.linear_of(effects or {}).dc_gain if fit.variant == "input" else 1.0
+            out["output_offset_at_centre"] = float(g0 * s * th[0])
+            out["output_offset_unit"] = uo
     elif fit.name == "hysteresis":
         out["thresholds"] = list(pipe.thresholds)
         out["weights"] = list(th)

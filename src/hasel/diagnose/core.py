@@ -30,7 +30,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hasel.diagnose.augment import FAMILIES, EffectFit, Pipeline, describe_params, fit_family, joint_refine
+from dataclasses import replace
+
+from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_family,
+                                    joint_refine, make_linear, split_linear)
 from hasel.diagnose.prep import Prepared, estimate_noise, nrmse, prepare
 from hasel.diagnose.where import analyse
 from hasel.errors import BadInputError
@@ -159,6 +162,18 @@ class Verdict:
                 "working_rate_hz": self.working_rate_hz, "elapsed_s": self.elapsed_s}
 
 
+def _model_delay(model) -> float:
+    if isinstance(model, dict) and model.get("delay_s") is not None:
+        try:
+            d = float(model["delay_s"])
+        except (TypeError, ValueError) as err:
+            raise BadInputError(f"model delay_s must be a number of seconds, got {model['delay_s']!r}") from err
+        if not math.isfinite(d) or d < 0:
+            raise BadInputError(f"model delay_s must be finite and >= 0, got {d}")
+        return d
+    return 0.0
+
+
 def _as_model(model) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(model, dict):
         if "num" not in model or "den" not in model:
@@ -182,34 +197,69 @@ def _as_model(model) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
+def _train_fit(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float = 0.0) -> float:
+    """Training NRMSE of a linear model's simulation, with its best output offset."""
+    from hasel.diagnose.prep import LinearSim
+
+    sim = LinearSim(num, den, prep.rate_hz)
+    es, ys = [], []
+    for r in prep.records:
+        if r.train.any():
+            u = np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u
+            es.append((r.y - sim.run(u))[r.train])
+            ys.append(r.y[r.train])
+    e, y = np.concatenate(es), np.concatenate(ys)
+    e = e - e.mean()
+    return float(np.linalg.norm(e) / max(np.linalg.norm(y - y.mean()), 1e-300))
+
+
 def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A linear model of the log: the internal output-error fit and/or ``hasel.ident``.
+
+    ``"auto"`` fits both when ``hasel.ident`` is there and keeps the one whose simulation
+    fits the training samples better (``hasel.ident`` fits frequency responses of
+    operating points; the internal fit the time-domain simulation the diagnosis uses).
+    """
     if opts.identify not in ("auto", "internal", "ident"):
         raise BadInputError(f"identify must be 'auto', 'internal' or 'ident', got {opts.identify!r}")
-    tried = None
+    cands = []
+    note = None
     if opts.identify in ("auto", "ident"):
         try:
             from hasel.ident import identify as ident_identify  # type: ignore[attr-defined]
 
+            say("identifying a linear model (hasel.ident)")
+            # hasel.ident splits and validates on its own: it sees the whole log (at the working rate)
             rec = prep.records[0]
-            m = rec.train
-            res = ident_identify(rec.t_s[m], rec.u[m], rec.y[m])
+            with np.errstate(all="ignore"):
+                res = ident_identify(rec.t_s, rec.u, rec.y)
             mj = res.to_model_json()
             num, den = _as_model(mj)
             if np.any(np.real(np.roots(den)) >= 0):
-                raise ValueError("unstable")
-            return num, den, {"source": "hasel.ident", "details": {k: v for k, v in mj.items()
-                                                                    if k not in ("num", "den")}}
+                raise ValueError("unstable model")
+            d = _model_delay(mj)
+            cands.append((_train_fit(prep, num, den, d), num, den,
+                          {"source": "hasel.ident", "delay_s": d,
+                           "details": {"order": int(den.size - 1),
+                                       **{k: mj[k] for k in ("fit", "frequency_band_hz", "static_gain") if k in mj}}}))
         except Exception as err:  # noqa: BLE001 - any failure falls back to the internal fit
             if opts.identify == "ident":
                 raise BadInputError(f"hasel.ident could not identify a model: {err}") from err
-            tried = f"hasel.ident unavailable or failed ({type(err).__name__}: {err})"
-    from hasel.diagnose.linfit import fit_linear
+            note = f"hasel.ident unavailable or failed ({type(err).__name__}: {err})"
+    if opts.identify in ("auto", "internal"):
+        from hasel.diagnose.linfit import fit_linear
 
-    say("identifying a linear model (internal output-error fit)")
-    num, den, info = fit_linear(prep, max_order=opts.max_order)
-    if tried:
-        info["note"] = tried
-    return num, den, {"source": "identified from the log", "details": info}
+        say("identifying a linear model (internal output-error fit)")
+        with np.errstate(all="ignore"):
+            num, den, info = fit_linear(prep, max_order=opts.max_order)
+        if note:
+            info["note"] = note
+        cands.append((_train_fit(prep, num, den), num, den, {"source": "identified from the log", "details": info}))
+    fit, num, den, src = min(cands, key=lambda c: c[0])
+    src["training_nrmse_with_offset"] = fit
+    if len(cands) > 1:
+        src["alternatives"] = {c[3]["source"]: c[0] for c in cands}
+    return num, den, src
 
 
 def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tuple[str, float] | None,
@@ -284,7 +334,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     t0 = time.perf_counter()
     if model is not None:
         num, den = _as_model(model)
-        source = {"source": "given"}
+        source = {"source": "given", "delay_s": _model_delay(model)}
     else:
         num = den = None
         source = {}
@@ -293,7 +343,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     say(f"working rate {prep.rate_hz:.4g} Hz ({prep.records[0].u.size} samples), {prep.split}")
     if model is None:
         num, den, source = _identify(prep, opts, say)
-    pipe = Pipeline(prep, num, den)
+    pipe = Pipeline(prep, num, den, delay_s=float(source.get("delay_s", 0.0) or 0.0))
 
     # noise floor from the nominal residual of the log
     r0 = prep.records[0].y - pipe.simulate({}, 0)
@@ -338,13 +388,82 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             eff = dict(base)
             eff[name] = fit
             m_tr, m_ho, e_new = scores(eff)
+            if identified:
+                alt = relinear(base, name, fit)
+                if alt is not None:
+                    a_tr, a_ho, a_e = scores(alt)
+                    if a_tr < m_tr:
+                        eff, fit, m_tr, m_ho, e_new = alt, alt[name], a_tr, a_ho, a_e
             out.append((m_ho, fit.n_params, name, fit, m_tr, e_new, eff))
-            label = " + ".join(list(base) + [name])
+            label = " + ".join([k for k in base if k != LINEAR] + [name]) + (" (re-identified)" if LINEAR in eff else "")
             say(f"  {label:40s} held-out NRMSE {to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
         out.sort(key=lambda r: (r[0], r[1]))
         return out
 
     prior = {n: i for i, n in enumerate(FAMILIES)}
+    identified = source.get("source") != "given"
+
+    def relinear(base: dict[str, EffectFit], name: str, fit: EffectFit) -> dict[str, EffectFit] | None:
+        """An input-side effect fitted jointly with a re-identified linear model.
+
+        A linear model identified first from the same log absorbs what it can of an effect (the
+        phase lag of a hysteresis loop, part of a delay); so, when the model was identified,
+        the effect is also fitted from a plain-gain start and the linear model re-identified
+        through it (twice)."""
+        if name not in INPUT_SIDE or any(k not in INPUT_SIDE + (LINEAR, "load_mass") for k in base):
+            return None
+        from hasel.diagnose.linfit import fit_linear
+
+        ys = np.concatenate([r.y[r.train] for r in prep.records])
+        us = np.concatenate([r.u[r.train] for r in prep.records])
+        k0 = float(us @ ys / max(us @ us, 1e-300))
+        a = 0.3 * np.pi * prep.rate_hz
+        eff = {**base, LINEAR: make_linear([k0 * a], [1.0, a])}
+        order = source.get("details", {}).get("order")
+        orders = ((min(int(order), opts.max_order),) if isinstance(order, (int, np.integer)) and order > 0
+                  else None)
+
+        def reident(e: dict[str, EffectFit]) -> EffectFit | None:
+            recs = [replace(r, u=pipe.stages(e, ri)["x_eff"]) for ri, r in enumerate(prep.records)]
+            try:
+                n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order)
+            except (ValueError, np.linalg.LinAlgError):
+                return None
+            return make_linear(n2, d2)
+
+        if name == "time_delay":
+            # a delay trades off against the model's time constants: profile it, re-identifying
+            # the linear model at each delay of a grid (alternating fits would lock in)
+            best_e, best_c = None, np.inf
+            for d in np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, max(fit.theta[0], 0.2 * pipe.span_s, 2 * prep.dt_s), 10)])):
+                e = {**base, name: EffectFit(name, "input", (float(d),))}
+                lin = reident(e)
+                if lin is None:
+                    continue
+                e[LINEAR] = lin
+                for _ in range(2):  # the other effects of the base follow the new linear part
+                    for k2 in [k for k in base if k != LINEAR]:
+                        f2 = fit_family(pipe, {k: v for k, v in e.items() if k != k2}, k2)
+                        if f2 is not None:
+                            e[k2] = f2
+                c = scores(e)[0]
+                if c < best_c:
+                    best_e, best_c = e, c
+            return best_e
+        for _ in range(2):
+            f = fit_family(pipe, eff, name)
+            if f is None:
+                return None
+            eff[name] = f
+            lin = reident(eff)
+            if lin is None:
+                return None
+            eff[LINEAR] = lin
+        f = fit_family(pipe, eff, name)
+        if f is None:
+            return None
+        eff[name] = f
+        return eff
 
     def pick(results: list[tuple]) -> tuple:
         """Lowest held-out error; near-ties (1 %) go to fewer parameters, then to the earlier family.
@@ -364,6 +483,9 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         if to_nrmse(mse_ho) <= opts.floor_margin * floor:
             say("at the noise floor: no further effect")
             break
+        if rnd > 0 and mse_ho - sigma2 < min(opts.min_nominal_share, opts.min_nominal_share_near_all) * (mse_nom - sigma2):
+            say("what is left is too small a share of the nominal gap for any further effect")
+            break
         results = try_all(current, [f for f in FAMILIES if f not in current][:max(opts.top_k, 1)])
         if rnd == 0:
             singles = results
@@ -379,7 +501,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             improved = []
             for r in results[:opts.pair_alternate]:
                 eff = dict(r[6])
-                names_ = list(eff)
+                names_ = [k for k in eff if k != LINEAR]
                 for _ in range(2):
                     for nm in names_:
                         f2 = fit_family(pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm)
@@ -397,7 +519,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         m_ho, k, name, fit, m_tr, e_new, eff_new = pick(results)
         k = sum(f.n_params for f in eff_new.values()) - sum(f.n_params for f in current.values())
         rounds.append({"round": rnd + 1, "candidates": [
-            {"name": " + ".join(r[6]), "nrmse_heldout": to_nrmse(r[0]), "n_params": r[1]} for r in results]})
+            {"name": " + ".join(k for k in r[6] if k != LINEAR), "nrmse_heldout": to_nrmse(r[0]), "n_params": r[1]}
+            for r in results]})
         gain = (mse_ho - m_ho) / mse_ho if mse_ho > 0 else 0.0
         above = max(mse_ho - sigma2, 0.0)
         gap_share = (mse_ho - m_ho) / above if above > 0 else 0.0
@@ -412,16 +535,17 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         big_enough = nominal_share >= opts.min_nominal_share or (
             gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all)
         ok = gain >= need and gap_share >= opts.min_gap_share and big_enough and z >= opts.z_min and dbic < 0
-        rounds[-1].update({"best": " + ".join(eff_new), "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
+        label_new = " + ".join(k for k in eff_new if k != LINEAR)
+        rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                            "z": z, "delta_bic": dbic, "accepted": bool(ok)})
-        say(f"round {rnd + 1}: best {' + '.join(eff_new)}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
+        say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), z {z:.1f}, dBIC {dbic:.3g} -> "
             f"{'accepted' if ok else 'rejected'}")
         if not ok:
             break
         r2 = next((r for r in results if r[2] != name), None)
         for n_new in eff_new:
-            if n_new not in current:
+            if n_new not in current and n_new != LINEAR:
                 evidence_of[n_new] = (gain, (r2[2], (mse_ho - r2[0]) / mse_ho) if r2 is not None and mse_ho > 0
                                       else None)
         for n_old in [n for n in current if n not in eff_new]:
@@ -429,7 +553,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         current = dict(eff_new)
         mse_tr, mse_ho, e_ho = m_tr, m_ho, e_new
         # swaps: with the newcomer in place, could an earlier choice be bettered by another family?
-        for old in [n for n in current if n != name]:
+        for old in [n for n in current if n not in (name, LINEAR)]:
             base = {k2: v for k2, v in current.items() if k2 != old}
             alts = try_all(base, [f for f in FAMILIES if f not in current])
             if alts and alts[0][0] < opts.swap_ratio * mse_ho:
@@ -451,13 +575,13 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     def loss_without(n: str) -> float:
         return scores({k2: v for k2, v in current.items() if k2 != n})[1]
 
-    ranked = sorted(current, key=loss_without, reverse=True)
+    ranked = sorted((n for n in current if n != LINEAR), key=loss_without, reverse=True)
     named: list[dict] = []
     for i, name in enumerate(ranked):
         fit = current[name]
-        m_after = scores({k2: current[k2] for k2 in ranked[:i + 1]})[1]
+        m_after = scores({k2: current[k2] for k2 in ranked[:i + 1] + ([LINEAR] if LINEAR in current else [])})[1]
         gain, runner = evidence_of.get(name, (0.0, None))
-        named.append({"name": name, "params": describe_params(pipe, fit, units),
+        named.append({"name": name, "params": describe_params(pipe, fit, units, effects=current),
                       "evidence": _evidence(name, fit, where, gain, runner, pipe),
                       "nrmse_after": to_nrmse(m_after), "gap_removed": gain,
                       "n_params": fit.n_params, "theta": list(fit.theta)})
@@ -478,6 +602,10 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                  "n_samples": int(y_ho.size), "gap_shrink": shrink,
                  "augmented_over_floor": nrmse_aug / floor if floor > 0 else float("inf")}
     model_d = {"num": [float(c) for c in num], "den": [float(c) for c in den], **source}
+    if LINEAR in current:
+        n2, d2 = split_linear(current[LINEAR])
+        model_d["reidentified"] = {"num": [float(c) for c in n2], "den": [float(c) for c in d2],
+                                   "note": "linear part re-identified through the named input-side effects"}
     elapsed = time.perf_counter() - t0
     say(f"done in {elapsed:.1f} s: {', '.join(e['name'] for e in named) or 'no effect'}; held-out NRMSE "
         f"{nrmse_nom:.4f} -> {nrmse_aug:.4f} (floor {floor:.4f})")

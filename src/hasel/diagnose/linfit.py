@@ -2,40 +2,45 @@
 
 For each order ``n`` (poles) the fit starts from the poles of an ARX model, mapped to
 continuous time, and refines them on the simulation (output) error; for given poles
-the numerator enters linearly and is solved by least squares inside the loop
-(variable projection), so only the poles are searched. The model goes through the
-origin (no offset): a log whose output is not zero at zero input then shows that as
-a static map with an offset, which the diagnosis reports. The order is the lowest
+the output is a combination of the modal (partial-fraction) responses, each an exact
+closed-form ZOH recursion, so the numerator is solved by least squares inside the
+loop (variable projection) and only the poles are searched. An output offset is
+fitted alongside but left out of the model, which goes through the origin: a log
+whose output is not zero at zero input then shows that as a static map with an
+offset, which the diagnosis reports. The order is the lowest
 whose training error is within 3 % of the best.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, signal
 
 from hasel.diagnose.prep import LinearSim, Prepared
+from hasel.errors import BadInputError
 
 __all__ = ["fit_linear"]
 
 
-def _poles_from_theta(th: np.ndarray, n_real: int) -> np.ndarray:
-    real = -np.exp(th[:n_real])
+def _poles_from_theta(th: np.ndarray, n_real: int, w_lo: float, w_hi: float) -> np.ndarray:
+    """Poles from free parameters: magnitudes ``w_lo + exp(theta)`` (at most ``w_hi``), damping logistic."""
+    mag = np.minimum(w_lo + np.exp(np.minimum(th, 50.0)), w_hi)
+    real = -mag[:n_real]
     pairs = []
     for i in range(n_real, th.size, 2):
-        wn, zeta = np.exp(th[i]), 1.0 / (1.0 + np.exp(-th[i + 1]))
+        wn, zeta = mag[i], 1.0 / (1.0 + np.exp(-th[i + 1]))
         re, im = -zeta * wn, wn * np.sqrt(max(1.0 - zeta * zeta, 0.0))
         pairs += [re + 1j * im, re - 1j * im]
     return np.concatenate([real.astype(complex), np.asarray(pairs, complex)])
 
 
-def _theta_from_poles(p: np.ndarray) -> tuple[np.ndarray, int]:
+def _theta_from_poles(p: np.ndarray, w_lo: float) -> tuple[np.ndarray, int]:
     real = np.sort(np.real(p[np.abs(p.imag) < 1e-9 * np.maximum(1, np.abs(p))]))
     cplx = p[p.imag >= 1e-9 * np.maximum(1, np.abs(p))]
-    th = list(np.log(np.maximum(-real, 1e-9)))
+    th = list(np.log(np.maximum(-real - w_lo, 1e-3 * w_lo + 1e-12)))
     for c in cplx:
         wn = abs(c)
         zeta = float(np.clip(-c.real / wn, 0.02, 0.98))
-        th += [np.log(wn), np.log(zeta / (1 - zeta))]
+        th += [np.log(max(wn - w_lo, 1e-3 * w_lo + 1e-12)), np.log(zeta / (1 - zeta))]
     return np.asarray(th, float), real.size
 
 
@@ -62,17 +67,52 @@ def _arx_poles(prep: Prepared, n: int) -> np.ndarray:
     return np.concatenate([s[np.abs(s.imag) < 1e-9], s[s.imag >= 1e-9], np.conj(s[s.imag >= 1e-9])])
 
 
-def _solve_num(prep: Prepared, den: np.ndarray) -> tuple[np.ndarray, float, list[np.ndarray]]:
-    n = den.size - 1
-    cols_all, ys, sims = [], [], []
-    for j in range(n):
-        num = np.zeros(j + 1)
-        num[0] = 1.0
-        sims.append(LinearSim(num, den, prep.rate_hz))
+def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float) -> list[np.ndarray]:
+    """Responses to ``u`` of ``1/(s - p)`` (real poles) and of the real and imaginary parts of
+    ``1/(s - p)`` (one of each conjugate pair): exact ZOH recursions in closed form, started at
+    rest with ``u[0]``, output at the centres of the intervals (as :class:`LinearSim`)."""
+    T = 1.0 / rate_hz
+    ext = np.concatenate([u, u[-1:]])
+    cols = []
+    for p in poles:
+        a = np.exp(p * T)
+        bb = (a - 1.0) / p
+        x0 = -u[0] / p
+        y = signal.lfilter([bb], [1.0, -a], ext[:-1], zi=[a * x0])[0]
+        x = np.concatenate([[x0], y])
+        mid = 0.5 * (x[:-1] + x[1:])
+        if abs(np.imag(p)) > 0:
+            cols += [np.real(mid), np.imag(mid)]
+        else:
+            cols.append(np.real(mid))
+    return cols
+
+
+def _modal_poles(poles: np.ndarray) -> np.ndarray:
+    """Real poles, then one pole (positive imaginary part) of each conjugate pair."""
+    tol = 1e-9 * np.maximum(1.0, np.abs(poles))
+    return np.concatenate([np.real(poles[np.abs(poles.imag) <= tol]).astype(complex), poles[poles.imag > tol]])
+
+
+def _solve_num(prep: Prepared, poles: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Best numerator for the given poles (least squares on the training samples).
+
+    The output is a combination of the modal responses (partial fractions), so for given
+    poles the numerator is linear and found by least squares; an output offset is
+    fitted alongside and dropped from the model (the dynamics and the incremental gain come
+    out right, and an offset is left for the diagnosis to name).
+
+    Returns the numerator, the training SSE and the denominator.
+    """
+    poles = np.asarray(poles, complex)
+    if not np.all(np.isfinite(poles)):
+        raise ValueError("non-finite poles")
+    mp = _modal_poles(poles)
+    cols_all, ys = [], []
     for rec in prep.records:
         if not rec.train.any():
             continue
-        B = np.column_stack([s.run(rec.u) for s in sims])
+        B = np.column_stack(_modal_columns(mp, rec.u, prep.rate_hz) + [np.ones(rec.u.size)])
         cols_all.append(B[rec.train])
         ys.append(rec.y[rec.train])
     A, b = np.vstack(cols_all), np.concatenate(ys)
@@ -80,41 +120,95 @@ def _solve_num(prep: Prepared, den: np.ndarray) -> tuple[np.ndarray, float, list
     scale[scale == 0] = 1.0
     c = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
     r = b - A @ c
-    # numerator: sum_j c_j s^j  (descending powers)
-    num = c[::-1]
-    return num, float(r @ r), [b]
+    full = np.concatenate([mp, np.conj(mp[mp.imag > 0])])
+    den = np.real(np.poly(full))
+    n = den.size - 1
+    num = np.zeros(n, complex)
+    i = 0
+    for k, p in enumerate(mp):
+        others = np.delete(full, k) if p.imag == 0 else np.delete(full, [k, mp.size + int(np.sum(mp[:k].imag > 0))])
+        rest = np.poly(others) if others.size else np.array([1.0])
+        if p.imag == 0:
+            term = c[i] * rest
+            i += 1
+        else:
+            term = np.polymul([c[i], -c[i] * p.real + c[i + 1] * p.imag], rest)
+            i += 2
+        num[n - term.size:] += term
+    return np.real(num), float(np.einsum('i,i->', r, r)), den
+
+
+def _rhp_zeros(num: np.ndarray) -> int:
+    """Number of zeros of ``num`` in the open right half-plane."""
+    nz = np.trim_zeros(np.asarray(num, float), "f")
+    if nz.size <= 1:
+        return 0
+    z = np.roots(nz)
+    return int(np.sum(np.real(z) > 1e-6 * np.maximum(np.abs(z), 1e-12)))
+
+
+def _minimum_phase(num: np.ndarray) -> bool:
+    """No zero in the right half-plane (zeros on the imaginary axis allowed).
+
+    Right half-plane zeros are how a rational model imitates a dead time (Pade); the fit
+    is kept minimum-phase so that a delay stays visible to the diagnosis.
+    """
+    nz = np.trim_zeros(np.asarray(num, float), "f")
+    if nz.size <= 1:
+        return True
+    z = np.roots(nz)
+    return bool(np.all(np.real(z) <= 1e-6 * np.maximum(np.abs(z), 1e-12)))
 
 
 def _fit_order(prep: Prepared, n: int) -> tuple[np.ndarray, np.ndarray, float]:
+    # modes slower than a twentieth of the log are offsets or drifts, not dynamics it can identify
+    w_lo = 20.0 / (prep.records[0].t_s[-1] - prep.records[0].t_s[0] + 1e-9)
+    w_hi = 0.45 * np.pi * prep.rate_hz
+    starts = []
     try:
-        p0 = _arx_poles(prep, n)
+        starts.append(_arx_poles(prep, n))
     except (np.linalg.LinAlgError, ValueError):
-        p0 = -np.geomspace(0.1, 0.1 * prep.rate_hz, n) + 0j
-    th0, n_real = _theta_from_poles(p0)
-    lo = np.log(1e-4 / (prep.records[0].t_s[-1] - prep.records[0].t_s[0] + 1e-9))
-    hi = np.log(0.45 * np.pi * prep.rate_hz)
+        pass
+    w_exc = 2 * np.pi * min(max(prep.f_excited_hz, 1e-6), 0.4 * prep.rate_hz)
+    starts.append(-np.geomspace(max(w_lo * 1.5, w_exc / 30.0), max(w_exc, w_lo * 3.0), n) + 0j)
+    def make_cost(n_real: int):
+        def cost(th: np.ndarray) -> float:
+            try:
+                num, sse, _ = _solve_num(prep, _poles_from_theta(th, n_real, w_lo, w_hi))
+            except (np.linalg.LinAlgError, ValueError, StopIteration, BadInputError):
+                return np.inf
+            # right half-plane zeros are penalised (a hard wall would leave the search no slope)
+            return sse * (1.0 + 10.0 * _rhp_zeros(num))
+        return cost
 
-    def cost(th: np.ndarray) -> float:
-        t2 = th.copy()
-        t2[:n_real] = np.clip(t2[:n_real], lo, hi)
-        t2[n_real::2] = np.clip(t2[n_real::2], lo, hi)
-        den = np.real(np.poly(_poles_from_theta(t2, n_real)))
-        try:
-            return _solve_num(prep, den)[1]
-        except (np.linalg.LinAlgError, ValueError):
-            return np.inf
+    best = None
+    for p0 in starts:
+        th0, n_real = _theta_from_poles(p0, w_lo)
+        cost = make_cost(n_real)
+        c0 = cost(th0)
+        if best is not None and c0 > 100 * best[0]:
+            continue
+        res = optimize.minimize(cost, th0, method="Nelder-Mead",
+                                options={"maxiter": 80 * th0.size, "xatol": 1e-2, "fatol": 1e-9})
+        th, c = (res.x, res.fun) if res.fun <= c0 else (th0, c0)
+        if best is None or c < best[0]:
+            best = (c, th, n_real)
+    _, th, n_real = best
+    num, _, den = _solve_num(prep, _poles_from_theta(th, n_real, w_lo, w_hi))
+    if not _minimum_phase(num):
+        return num, den, np.inf
+    # score the model itself (a near-singular basis can look better than the model it adds up
+    # to), with its best offset
+    sim = LinearSim(num, den, prep.rate_hz)
+    es = [(rec.y - sim.run(rec.u))[rec.train] for rec in prep.records if rec.train.any()]
+    e = np.concatenate(es)
+    e = e - e.mean()
+    sse = float(np.einsum('i,i->', e, e))
+    return num, den, sse if np.isfinite(sse) else np.inf
 
-    res = optimize.minimize(cost, th0, method="Nelder-Mead",
-                            options={"maxiter": 120 * th0.size, "xatol": 1e-3, "fatol": 1e-9})
-    th = res.x if res.fun <= cost(th0) else th0
-    th[:n_real] = np.clip(th[:n_real], lo, hi)
-    th[n_real::2] = np.clip(th[n_real::2], lo, hi)
-    den = np.real(np.poly(_poles_from_theta(th, n_real)))
-    num, sse, _ = _solve_num(prep, den)
-    return num, den, sse
 
-
-def fit_linear(prep: Prepared, max_order: int = 4) -> tuple[np.ndarray, np.ndarray, dict]:
+def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | None = None
+               ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Identify a stable, strictly proper continuous model ``num/den`` from the training samples.
 
     Parameters
@@ -123,6 +217,8 @@ def fit_linear(prep: Prepared, max_order: int = 4) -> tuple[np.ndarray, np.ndarr
         Working-rate data (only ``train`` samples are used).
     max_order : int
         Largest number of poles tried.
+    orders : tuple of int, optional
+        Exactly these numbers of poles (instead of ``1 .. max_order``).
 
     Returns
     -------
@@ -132,11 +228,14 @@ def fit_linear(prep: Prepared, max_order: int = 4) -> tuple[np.ndarray, np.ndarr
         ``{"order", "nrmse_train", "orders": {n: nrmse}}``.
     """
     y = np.concatenate([r.y[r.train] for r in prep.records])
-    fits = {}
-    for n in range(1, max_order + 1):
+    fits = {}  # nrmse here is with the best offset (the model's own scale of error)
+    for n in (orders or range(1, max_order + 1)):
         try:
-            num, den, sse = _fit_order(prep, n)
-        except (np.linalg.LinAlgError, ValueError):
+            with np.errstate(all="ignore"):
+                num, den, sse = _fit_order(prep, n)
+        except (np.linalg.LinAlgError, ValueError, BadInputError):
+            continue
+        if not np.isfinite(sse):
             continue
         fits[n] = (num, den, float(np.sqrt(sse) / np.linalg.norm(y - y.mean())))
     if not fits:
@@ -144,6 +243,8 @@ def fit_linear(prep: Prepared, max_order: int = 4) -> tuple[np.ndarray, np.ndarr
     best = min(f[2] for f in fits.values())
     order = min(n for n, f in fits.items() if f[2] <= 1.03 * best + 1e-12)
     num, den, e = fits[order]
+    if not np.isfinite(e):
+        raise ValueError("no stable minimum-phase linear model could be fitted")
     return num, den, {"order": order, "nrmse_train": e, "orders": {n: f[2] for n, f in fits.items()},
                       "method": "internal output-error fit"}
 

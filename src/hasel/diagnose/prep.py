@@ -8,9 +8,9 @@ continuous model is simulated with its input held over each interval and its out
 taken mid-interval (the mean of the states at the interval's ends): no half-sample
 delay either way, whether the samples were block means or instantaneous values.
 
-Without a separate held-out log, the record is cut into blocks and every third
-block is held out (interleaved), so that training and held-out data both span the
-levels, directions and events of the log; models are always simulated over the
+Without a separate held-out log, the record is cut into blocks (of jittered
+lengths) and one block of every three is held out (interleaved), so that training
+and held-out data both span the levels, directions and events of the log; models are always simulated over the
 whole record from its input alone and scored on the held-out samples only.
 
 The noise floor comes from the data: the residual's spectral level in the band
@@ -19,6 +19,7 @@ band); for logs with no such band, from third differences of the residual.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -138,8 +139,10 @@ def excited_band_hz(u: np.ndarray, rate_hz: float, rel_level: float = 1e-4) -> f
 
 
 def dominant_time_constant_s(den: np.ndarray) -> float:
-    """Slowest time constant of a stable denominator, s (1 / smallest |real part| of its poles)."""
+    """Slowest time constant of a stable denominator, s (1 / smallest |real part| of its poles; 0 without poles)."""
     p = np.roots(np.asarray(den, float))
+    if p.size == 0:
+        return 0.0  # a static gain: no dynamics
     re = np.abs(np.real(p[np.abs(p) > 1e-12]))
     return float(1.0 / re.min()) if re.size and re.min() > 0 else float("inf")
 
@@ -150,11 +153,26 @@ def _block_mean(x: np.ndarray, q: int) -> np.ndarray:
 
 
 def _interleave(n: int, n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
-    edges = np.linspace(0, n, n_blocks + 1).astype(int)
+    """Train/held-out masks: blocks of jittered lengths, one held out per run of three, never two adjacent.
+
+    Which block of each three is held out, and the lengths, are drawn from a fixed seed:
+    regular blocks would alias with a periodic excitation (three blocks of a third of a
+    period would hold out the same phase every time).
+    """
+    rng = np.random.default_rng(20240611)
+    w = rng.uniform(0.7, 1.3, n_blocks)
+    edges = np.concatenate([[0], np.round(np.cumsum(w) / w.sum() * n)]).astype(int)
     hold = np.zeros(n, bool)
-    for b in range(n_blocks):
-        if b % 3 == 2:
-            hold[edges[b]:edges[b + 1]] = True
+    last = -2
+    for g in range(0, n_blocks, 3):
+        # never two held-out blocks in a row: an event (a step's transient) is then always
+        # seen in part by the training data too
+        choices = [b for b in range(g, min(g + 3, n_blocks)) if b > last + 1]
+        if not choices:
+            continue
+        b = choices[int(rng.integers(len(choices)))]
+        hold[edges[b]:edges[b + 1]] = True
+        last = b
     return ~hold, hold
 
 
@@ -175,7 +193,8 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     target_rate_hz : float, optional
         Force the working rate (rounded to a whole decimation factor).
     n_blocks : int
-        Interleaved blocks of a self-held-out split (every third is held out).
+        Fewest interleaved blocks of a self-held-out split (one of every three is held
+        out); short logs get blocks of about twelve samples, up to 240 blocks.
     max_samples : int
         Cap on working samples (the rate is lowered, never below 8 times the band).
 
@@ -206,10 +225,12 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         hold_log = (th, uh, yh)
     tw, uw, yw = _block_mean(t, q), _block_mean(uu, q), _block_mean(yy, q)
     if hold_log is None:
-        nb = int(min(n_blocks, max(6, tw.size // 20)))
+        # blocks of about a dozen samples in short logs (an event such as a single step is then
+        # shared by training and held-out data), up to 240 blocks in long ones
+        nb = int(min(max(n_blocks, tw.size // 12), 240, max(6, tw.size // 20)))
         tr, ho = _interleave(tw.size, nb)
         records.append(Record(tw, uw, yw, tr, ho))
-        split = f"interleaved: every third of {nb} blocks held out"
+        split = f"interleaved: one of every three of {nb} blocks held out"
     else:
         records.append(Record(tw, uw, yw, np.ones(tw.size, bool), np.zeros(tw.size, bool)))
         th, uh, yh = (_block_mean(x, q) for x in hold_log)
@@ -241,7 +262,19 @@ class LinearSim:
                                 f"to be simulated; poles {np.round(p, 4).tolist()}")
         self.num, self.den = num, den
         self.dc_gain = float(np.polyval(num, 0.0) / np.polyval(den, 0.0))
-        self.sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
+        try:
+            with np.errstate(all="ignore"):
+                self.sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
+            if not np.all(np.isfinite(self.sos)):
+                raise ValueError("non-finite sections")
+        except (StopIteration, ValueError, np.linalg.LinAlgError):
+            # zeros at s = 0 or extreme pole spreads: plain ZOH through the polynomial form
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", signal.BadCoefficients)
+                numd, dend, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method="zoh")
+                self.sos = signal.tf2sos(np.atleast_1d(np.squeeze(numd)), dend)
+            if not np.all(np.isfinite(self.sos)):
+                raise BadInputError("the model cannot be discretised at the working rate (non-finite result)")
         self._zi = signal.sosfilt_zi(self.sos)
 
     def run(self, u: np.ndarray) -> np.ndarray:

@@ -86,7 +86,7 @@ def model_error_model(u: np.ndarray, r: np.ndarray, rate_hz: float, n_taps: int,
     Rc = np.fft.rfft(rc, nfft)
     ruu = np.fft.irfft(U * np.conj(U), nfft)[:n_taps] / n
     rur = np.fft.irfft(Rc * np.conj(U), nfft)[:n_taps] / n
-    ruu[0] *= 1.0 + 1e-9
+    ruu[0] *= 1.0 + 1e-6  # a little ridge: frequencies the input does not excite stay near zero
     try:
         h = linalg.solve_toeplitz(ruu, rur)
     except (linalg.LinAlgError, ValueError):
@@ -185,9 +185,18 @@ def analyse(pipe: Pipeline, sigma2: float, noise_method: str) -> dict:
         nw = float(noise_psd * m.sum() * df)
         bands.append({"f_lo_hz": float(a), "f_hi_hz": float(b), "residual_power": pw, "noise_power": nw,
                       "ratio_db": float(10 * np.log10(max(pw, 1e-300) / max(nw, 1e-300)))})
-    n_taps = int(np.clip(round(3 * tdom * fs), 10, 150))
-    fg = np.geomspace(f_lo, max(f_exc, 2 * f_lo), 40)
-    mem = model_error_model(u, r, fs, n_taps, fg)
+    # the error model lives at a rate a few times the excited band (block means), where the
+    # input excites every frequency the FIR can represent: a well-conditioned estimate
+    q = max(1, int(fs // max(6.0 * f_exc, 1e-9)))
+    fs_m = fs / q
+    nq = (n // q) * q
+    u_m = u[:nq].reshape(-1, q).mean(axis=1)
+    r_m = r[:nq].reshape(-1, q).mean(axis=1)
+    n_taps = int(np.clip(round(3 * tdom * fs_m), 8, 120))
+    n_taps = min(n_taps, max(4, u_m.size // 10))
+    fg = np.geomspace(f_lo, max(min(f_exc, 0.45 * fs_m), 2 * f_lo), 40)
+    mem = model_error_model(u_m, r_m, fs_m, n_taps, fg)
+    mem["rate_hz"] = fs_m
     from hasel.lti import tf_freqresp
 
     gnom = np.abs(tf_freqresp(pipe.num, pipe.den, fg))

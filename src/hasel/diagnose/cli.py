@@ -1,0 +1,152 @@
+"""``hasel diagnose DATA [--heldout DATA2] [--model MODEL.json] --json VERDICT.json [--export-sim FILE.csv] [--report DIR]``.
+
+Loads the log (``.mcap``, ``.csv`` or ``.mat`` through :func:`hasel.io.load_io`, with
+the same ``--time/--input/--output`` options as ``hasel identify``), diagnoses the gap
+to the nominal model (:func:`hasel.diagnose.diagnose`) and writes VERDICT.json, the
+held-out simulations (``--export-sim``: columns ``t_s, measured, nominal,
+augmented``) and a report. Progress goes to stderr, a summary to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hasel.errors import BadInputError
+
+__all__ = ["add_arguments", "run", "json_safe"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of ``hasel diagnose``."""
+    p.add_argument("data", metavar="DATA", help="the log: .mcap (ROS 2), .csv (header row) or .mat")
+    p.add_argument("--heldout", metavar="DATA2", help="a second log of the same system for scoring "
+                   "(default: every third of 30 interleaved blocks of DATA is held out)")
+    p.add_argument("--model", metavar="MODEL.json", help="the nominal model {\"num\", \"den\"[, \"delay_s\"]} "
+                   "(default: identify a linear model from DATA first)")
+    p.add_argument("--json", metavar="VERDICT.json", help="write the verdict here")
+    p.add_argument("--export-sim", metavar="FILE.csv", help="write t_s, measured, nominal, augmented over "
+                   "the held-out data (at the working rate)")
+    p.add_argument("--report", metavar="DIR", help="write report.md and figures into DIR")
+    p.add_argument("--time", metavar="COL", default=None, help="CSV/MAT time column, s (default t_s), or fs=RATE_HZ")
+    p.add_argument("--input", metavar="COL|/topic.field", default=None,
+                   help="input signal: CSV column (default voltage_kv) or MCAP /topic.field")
+    p.add_argument("--output", metavar="COL|/topic.field", default=None,
+                   help="output signal: CSV column (default stroke_mm) or MCAP /topic.field")
+    p.add_argument("--identify", choices=("auto", "internal", "ident"), default="auto",
+                   help="without --model: hasel.ident if it succeeds (auto), always it (ident), or the "
+                   "internal output-error fit (internal)")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="working rate, Hz (default: about 25 times the input's band)")
+    p.add_argument("--max-effects", type=int, default=3, metavar="N", help="most effects named (default 3)")
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with numpy scalars/arrays made plain and NaN/inf replaced by ``None``."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer, int)):
+        return int(obj)
+    if isinstance(obj, (np.floating, float)):
+        x = float(obj)
+        return x if math.isfinite(x) else None
+    return obj
+
+
+def _write_atomic(path: str, text: str) -> None:
+    target = Path(path)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".diagnose-", dir=target.parent)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, target)
+    except OSError as err:
+        raise BadInputError(f"cannot write {target}: {err.strerror or err}") from err
+
+
+def _load_model(path: str) -> dict:
+    try:
+        with open(path) as fh:
+            model = json.load(fh)
+    except FileNotFoundError as err:
+        raise BadInputError(f"no such model file: {path}") from err
+    except (OSError, json.JSONDecodeError) as err:
+        raise BadInputError(f"cannot read the model {path}: {err}") from err
+    if not isinstance(model, dict) or "num" not in model or "den" not in model:
+        raise BadInputError(f"{path} is not a MODEL.json: it needs \"num\" and \"den\" lists")
+    return model
+
+
+def _units(data: Any) -> tuple[str, str]:
+    try:
+        from hasel.ident import unit_from_name
+
+        return unit_from_name(data.input_name) or "", unit_from_name(data.output_name) or ""
+    except Exception:  # noqa: BLE001 - units are only labels
+        return "", ""
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``hasel diagnose``; return the exit code (bad input raises :class:`BadInputError`)."""
+    from hasel.diagnose.core import DiagnoseOptions, diagnose
+    from hasel.io import load_io
+
+    t0 = time.perf_counter()
+
+    def say(msg: str) -> None:
+        sys.stderr.write(f"hasel diagnose: {msg} ({time.perf_counter() - t0:.1f} s)\n")
+        sys.stderr.flush()
+
+    if args.max_effects < 0:
+        raise BadInputError(f"--max-effects must be >= 0, got {args.max_effects}")
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        raise BadInputError(f"--rate must be a positive number of Hz, got {args.rate}")
+    model = _load_model(args.model) if args.model else None
+    say(f"loading {args.data}")
+    data = load_io(args.data, time=args.time, input=args.input, output=args.output)
+    held = None
+    if args.heldout:
+        say(f"loading {args.heldout}")
+        h = load_io(args.heldout, time=args.time, input=args.input, output=args.output)
+        held = (h.t_s, h.u, h.y)
+    units = _units(data)
+    opts = DiagnoseOptions(max_effects=args.max_effects, identify=args.identify, target_rate_hz=args.rate,
+                           progress=say)
+    v = diagnose(data.t_s, data.u, data.y, model=model, heldout=held, options=opts, units=units)
+    out = v.to_json()
+    out["signals"] = {"input": data.input_name, "output": data.output_name, "units": list(units),
+                      "data": str(args.data), "heldout": str(args.heldout) if args.heldout else None}
+    if args.json:
+        _write_atomic(args.json, json.dumps(json_safe(out), indent=2, allow_nan=False) + "\n")
+        say(f"wrote {args.json}")
+    if args.export_sim:
+        ex = v.export
+        rows = np.column_stack([ex["t_s"], ex["measured"], ex["nominal"], ex["augmented"]])
+        lines = ["t_s,measured,nominal,augmented"] + [",".join(f"{x:.9g}" for x in row) for row in rows]
+        _write_atomic(args.export_sim, "\n".join(lines) + "\n")
+        say(f"wrote {args.export_sim} ({rows.shape[0]} held-out samples)")
+    if args.report:
+        from hasel.diagnose.report import write_report
+
+        path = write_report(v, args.report, units)
+        say(f"wrote {path}")
+    from hasel.diagnose.report import verdict_lines
+
+    for line in verdict_lines(v, units):
+        print(line)
+    return 0

@@ -1,0 +1,80 @@
+"""Readers of the real datasets, and the diagnosis naming their documented effects.
+
+The data are public measurements of other real systems (``shared/datasets/README.md``);
+the tests are skipped where that directory is not present.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hasel import datasets as D
+from hasel.diagnose import diagnose
+from hasel.errors import DataFileError
+
+HAVE = (D.datasets_dir() / "README.md").is_file()
+needs_data = pytest.mark.skipif(not HAVE, reason="shared/datasets not present")
+
+
+def test_missing_directory_is_a_data_file_error(tmp_path):
+    with pytest.raises(DataFileError, match="dataset file not found"):
+        D.load_piezo(tmp_path)
+
+
+@needs_data
+def test_readers_give_the_documented_shapes_rates_and_units():
+    p = D.load_piezo()
+    assert p.t_s.size == 50_001 and p.rate_hz == pytest.approx(5000.0, rel=1e-3)
+    assert (p.input_unit, p.output_unit) == ("V", "um")
+    assert np.ptp(p.u) == pytest.approx(300.0, rel=0.01) and np.ptp(p.y) == pytest.approx(39.4, rel=0.02)
+    est, val = D.load_cascaded_tanks()
+    assert est.u.size == val.u.size == 1024 and est.rate_hz == pytest.approx(0.25)
+    assert np.sum(est.y >= 10.0) == 47 and np.sum(val.y >= 10.0) == 37  # the overflow clips
+    s = D.load_silverbox("all")
+    assert s.u.size == 131_072 and s.rate_hz == pytest.approx(D.SILVERBOX_RATE_HZ)
+    assert D.load_silverbox().u.size == 131_072 - 40_000
+    m, b = D.load_dc_motor(), D.load_dc_motor(brake=True)
+    assert (m.u.size, b.u.size) == (1221, 1101) and m.rate_hz == pytest.approx(100.0)
+    assert set(np.unique(m.u)) == {5.0, 15.0} and m.output_unit == "rpm"
+
+
+@needs_data
+def test_piezo_with_a_quasi_static_nominal_shows_hysteresis():
+    # far below its resonance a piezo stack is a gain: that is the nominal a simulator uses
+    d = D.load_piezo()
+    k = float(d.u @ d.y / (d.u @ d.u))
+    v = diagnose(d.t_s, d.u, d.y, model={"num": [k], "den": [1.0]}, units=("V", "um"))
+    assert v.names[0] == "hysteresis"
+    assert v.heldout["nrmse_augmented"] < 0.5 * v.heldout["nrmse_nominal"]
+
+
+@needs_data
+def test_dc_motor_affine_map_and_dead_time_without_a_model():
+    d = D.load_dc_motor()
+    v = diagnose(d.t_s, d.u, d.y, units=("V", "rpm"))
+    assert set(v.names[:2]) == {"static_nonlinearity", "time_delay"}
+    delay = next(e for e in v.effects if e["name"] == "time_delay")["params"]["delay_s"]
+    assert 0.06 < delay < 0.15  # the README: about 0.09 s
+    # the affine map: an incremental gain about 245 rpm/V and an intercept about -160 rpm
+    st = next(e for e in v.effects if e["name"] == "static_nonlinearity")["params"]
+    m = v.model.get("reidentified", v.model)
+    assert 220 < m["num"][-1] / m["den"][-1] < 270
+    assert -200 < st["output_offset_at_centre"] < -120
+
+
+@needs_data
+def test_dc_motor_brake_is_a_changed_load():
+    free, brake = D.load_dc_motor(), D.load_dc_motor(brake=True)
+    model = diagnose(free.t_s, free.u, free.y).model  # the motor without brake, identified
+    v = diagnose(brake.t_s, brake.u, brake.y, model=model)
+    assert v.names[0] == "load_mass"
+    assert 0.45 < v.effects[0]["params"]["gain_factor"] < 0.75  # README: 245 -> 151 rpm/V
+
+
+@needs_data
+def test_silverbox_cubic_stiffness_is_a_static_nonlinearity():
+    d = D.load_silverbox()
+    d = d.crop(d.t_s[0] + 10.0, d.t_s[0] + 30.0)
+    v = diagnose(d.t_s, d.u, d.y)
+    assert v.names[0] == "static_nonlinearity"
+    assert v.heldout["nrmse_augmented"] < 0.5 * v.heldout["nrmse_nominal"]

@@ -1,0 +1,167 @@
+"""Gap diagnosis: preparation, simulation, noise floor, error model, and verdicts on truth-plant logs."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from hasel import paper
+from hasel.diagnose import DiagnoseOptions, diagnose
+from hasel.diagnose.blind import excitation
+from hasel.diagnose.linfit import fit_linear
+from hasel.diagnose.prep import LinearSim, estimate_noise, nrmse, prepare
+from hasel.diagnose.where import model_error_model
+from hasel.effects import EFFECT_NAMES, TruthActuator, from_name
+from hasel.errors import BadInputError
+from hasel.lti import tf_freqresp
+from hasel.plant import amplifier_filter_tf
+
+
+def _nominal() -> tuple[np.ndarray, np.ndarray]:
+    an, ad = amplifier_filter_tf()
+    num, den = paper.plant_tf()
+    return np.polymul(an, num), np.polymul(ad, den)
+
+
+def _log(effects, seed: int, noise_mm: float = 0.005):
+    rng = np.random.default_rng(seed)
+    u = excitation(rng, quick=True)
+    act = TruthActuator(effects)
+    act.reset(float(u[0]))
+    z = act.measure_mm(act.run(u).stroke_mm)
+    return np.arange(u.size) / act.rate_hz, u, z + noise_mm * rng.standard_normal(u.size)
+
+
+def test_nrmse_definition():
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    assert nrmse(y, y) == 0.0
+    assert nrmse(y, np.full(4, y.mean())) == pytest.approx(1.0)
+    assert nrmse(y, y + 0.5) == pytest.approx(0.5 * 2 / math.sqrt(5))
+
+
+def test_prepare_rate_split_and_blocks():
+    t = np.arange(200_000) / 10_000.0
+    u = signal.chirp(t, 0.1, t[-1], 10.0)
+    p = prepare(t, u, u)
+    r = p.records[0]
+    assert 150.0 <= p.rate_hz <= 500.0 and p.rate_hz * p.decimation == pytest.approx(10_000.0)
+    assert r.train.sum() + r.hold.sum() == r.u.size and not np.any(r.train & r.hold)
+    assert 0.25 < r.hold.mean() < 0.4
+    # block means: exactly the mean of each group of original samples
+    np.testing.assert_allclose(r.u[:3], u[:3 * p.decimation].reshape(3, -1).mean(axis=1))
+    # held-out blocks never touch each other
+    edges = np.flatnonzero(np.diff(r.hold.astype(int)))
+    runs = np.diff(np.concatenate([[0], edges + 1, [r.u.size]]))
+    assert runs.min() >= 2
+
+
+def test_prepare_rejects_unusable_logs():
+    with pytest.raises(BadInputError, match="at least 50"):
+        prepare(np.arange(10.0), np.arange(10.0), np.arange(10.0))
+    with pytest.raises(BadInputError, match="one length"):
+        prepare(np.arange(100.0), np.arange(99.0), np.arange(100.0))
+
+
+def test_linear_sim_matches_the_frequency_response():
+    num, den = [5.0, 40.0], np.polymul([1.0, 4.0], [1.0, 6.0, 225.0])
+    rate, f = 400.0, 1.7
+    t = np.arange(int(40 * rate)) / rate
+    y = LinearSim(num, den, rate).run(np.sin(2 * np.pi * f * t))
+    g = tf_freqresp(num, den, [f])[0]
+    tail = t > 20
+    ref = abs(g) * np.sin(2 * np.pi * f * t + np.angle(g))
+    assert np.max(np.abs(y[tail] - ref[tail])) < 2e-3 * abs(g)  # centred intervals: no half-sample lag
+
+
+def test_noise_estimate_of_white_noise_on_a_smooth_signal(rng=None):
+    rng = np.random.default_rng(5)
+    t = np.arange(40_000) / 1000.0
+    smooth = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 3.1 * t)
+    for sigma in (0.01, 0.1):
+        var, method = estimate_noise(smooth + sigma * rng.standard_normal(t.size), 1000.0, 3.1)
+        assert method == "spectral"
+        assert math.sqrt(var) == pytest.approx(sigma, rel=0.1)
+
+
+def test_model_error_model_recovers_a_linear_difference():
+    rng = np.random.default_rng(3)
+    rate = 200.0
+    u = signal.lfilter([1.0], [1.0, -0.9], rng.standard_normal(20_000))
+    g1, g2 = ([10.0], [1.0, 10.0]), ([12.0], [1.0, 10.0])  # 20 % more gain
+    r = LinearSim(*g2, rate).run(u) - LinearSim(*g1, rate).run(u) + 0.01 * rng.standard_normal(u.size)
+    f = np.array([0.2, 1.0, 3.0])
+    mem = model_error_model(u, r, rate, 60, f)
+    expect = np.abs(tf_freqresp(*g2, f) - tf_freqresp(*g1, f))
+    np.testing.assert_allclose(mem["mag"], expect, rtol=0.1)
+    assert all(mem["significant"]) and mem["linear_share"] > 0.95
+
+
+def test_linear_fit_recovers_a_second_order_model():
+    rng = np.random.default_rng(11)
+    rate = 100.0
+    t = np.arange(6000) / rate
+    u = np.repeat(rng.uniform(-1, 1, 60), 100)
+    num, den = [0.0, 30.0], [1.0, 4.0, 25.0]
+    y = LinearSim(num, den, rate).run(u) + 0.7 + 1e-3 * rng.standard_normal(u.size)  # an offset too
+    p = prepare(t, u, y)
+    n2, d2, info = fit_linear(p, max_order=3)
+    assert info["order"] == 2
+    np.testing.assert_allclose(np.sort_complex(np.roots(d2)), np.sort_complex(np.roots(den)), rtol=0.02)
+    assert n2[-1] / d2[-1] == pytest.approx(30.0 / 25.0, rel=0.02)  # the offset is not in the model
+
+
+def test_no_effect_names_nothing_and_reaches_the_floor():
+    t, u, y = _log([], seed=21)
+    v = diagnose(t, u, y, model=_nominal())
+    assert v.effects == []
+    assert v.heldout["nrmse_nominal"] < 1.3 * v.noise_floor_nrmse
+
+
+@pytest.mark.parametrize("effect,seed", [
+    (from_name("time_delay", delay_s=0.012), 22),
+    (from_name("static_nonlinearity", kind="electrostatic", strength=0.4), 23),
+    (from_name("hysteresis", half_width_kv=0.3, h_sat_kv=0.5), 24),
+])
+def test_single_effect_is_named_first_and_the_gap_shrinks(effect, seed):
+    t, u, y = _log([effect], seed=seed)
+    v = diagnose(t, u, y, model=_nominal(), units=("kV", "mm"))
+    assert v.names[0] == effect.name
+    h = v.heldout
+    assert (h["nrmse_nominal"] - h["nrmse_augmented"]) / (h["nrmse_nominal"] - v.noise_floor_nrmse) > 0.7
+    if effect.name == "time_delay":
+        assert v.effects[0]["params"]["delay_s"] == pytest.approx(0.012, rel=0.15)
+
+
+def test_verdict_json_has_the_promised_shape():
+    t, u, y = _log([from_name("sensor_nonlinearity", bow_mm=0.4)], seed=25)
+    v = diagnose(t, u, y, model={"num": list(_nominal()[0]), "den": list(_nominal()[1])})
+    out = json.loads(json.dumps(v.to_json(), default=float))
+    assert {"effects", "where", "heldout", "noise_floor_nrmse"} <= set(out)
+    assert {"nrmse_nominal", "nrmse_augmented"} <= set(out["heldout"])
+    for e in out["effects"]:
+        assert e["name"] in EFFECT_NAMES and {"params", "evidence", "nrmse_after"} <= set(e)
+    assert {"frequency", "time", "level", "direction", "amplitude"} <= set(out["where"])
+    assert out["effects"][0]["name"] == "sensor_nonlinearity"
+    ex = v.export
+    assert set(ex) == {"t_s", "measured", "nominal", "augmented"} and ex["t_s"].size == v.heldout["n_samples"]
+    assert nrmse(ex["measured"], ex["augmented"]) == pytest.approx(v.heldout["nrmse_augmented"], rel=1e-9)
+
+
+def test_the_models_own_delay_is_part_of_the_nominal():
+    t, u, y = _log([from_name("time_delay", delay_s=0.01)], seed=26)
+    num, den = _nominal()
+    v = diagnose(t, u, y, model={"num": list(num), "den": list(den), "delay_s": 0.01})
+    assert "time_delay" not in v.names
+
+
+def test_bad_models_are_bad_input():
+    t, u, y = _log([], seed=27)
+    with pytest.raises(BadInputError, match="stable"):
+        diagnose(t, u, y, model=([1.0], [1.0, -2.0]))
+    with pytest.raises(BadInputError, match="'num' and 'den'"):
+        diagnose(t, u, y, model={"num": [1.0]})
+    with pytest.raises(BadInputError, match="identify must be"):
+        diagnose(t, u, y, options=DiagnoseOptions(identify="magic"))
