@@ -849,8 +849,8 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
         out["gain_factor"] = th[1]
         out["resonance_factor"] = 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")
     elif fit.name == "asymmetric_dynamics":
-        out["tau_rising_s"] = th[0]
-        out["tau_falling_s"] = th[1]
+        out["tau_rising_s"] = th[0] if th[0] >= 1e-6 else 0.0
+        out["tau_falling_s"] = th[1] if th[1] >= 1e-6 else 0.0
         out["falling_tau_level_slope"] = th[2]
         out["form"] = "lag: tau_rising while rising, tau_falling*exp(k*w) while falling, w = (y - c)/s"
     elif fit.name == "charge_drift":

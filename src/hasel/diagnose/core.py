@@ -8,9 +8,20 @@ a nominal model (or identifies a linear one first), then
 2. **which**: fits every generic augmentation (:mod:`hasel.diagnose.augment`) on
    the training samples and scores it by the held-out gap it removes; forward
    selection adds the best one while it helps significantly (see
-   :class:`DiagnoseOptions`), re-fitting the candidates on top of what is chosen;
+   :class:`DiagnoseOptions`), re-fitting the candidates on top of what is chosen.
+   The second round also fits pairs among the best single effects (alternating
+   their fits), because one flexible augmentation can soak up the signatures of
+   two effects; after each addition an earlier choice is swapped for another
+   family if that is better; the chosen parameters are refined jointly at the end.
+   When the nominal model was identified from the same log, the input-side
+   effects are also fitted with the linear model re-identified through them (a
+   delay by profiling it over a grid), since a linear model fitted first absorbs
+   what it can of them;
 3. **how far**: held-out NRMSE of the nominal and augmented models after each
    effect, and the distance to the noise floor.
+
+Effects are ranked by importance: the held-out loss when each is taken out of the
+final set.
 
 The acceptance test of a candidate is on held-out data: it must remove at least a
 given share of the held-out residual energy and of the part of it above the noise
@@ -23,18 +34,16 @@ lower the training BIC with the noise variance known (``ln(n)`` per parameter).
 from __future__ import annotations
 
 import math
-import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
-
-from dataclasses import replace
+from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_family,
                                     joint_refine, make_linear, split_linear)
-from hasel.diagnose.prep import Prepared, estimate_noise, nrmse, prepare
+from hasel.diagnose.prep import Prepared, estimate_noise, prepare
 from hasel.diagnose.where import analyse
 from hasel.errors import BadInputError
 
@@ -262,6 +271,10 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
     return num, den, src
 
 
+def _tau(x: float) -> str:
+    return "0 s (at once)" if x < 1e-6 else f"{x:.3g} s"
+
+
 def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tuple[str, float] | None,
               pipe: Pipeline) -> str:
     lv, dr, tm, fr = where["level"], where["direction"], where["time"], where["frequency"]
@@ -290,7 +303,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                        f"rate-independent play-operator memory explains it"),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
-                                f"rises with tau {fit.theta[0]:.3g} s and falls with tau {fit.theta[1]:.3g} s"),
+                                f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}"),
         "charge_drift": lambda: (f"the residual varies slowly in time (slow share {100 * tm['slow_share']:.0f} %, trend "
                          f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
                          f"{fit.theta[0]:.3g} s), not its present level"),
@@ -423,33 +436,53 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         orders = ((min(int(order), opts.max_order),) if isinstance(order, (int, np.integer)) and order > 0
                   else None)
 
+        lin0 = base.get(LINEAR)
+        poles0 = np.roots(split_linear(lin0)[1] if lin0 is not None else den)
+        if orders is not None and poles0.size != orders[0]:
+            poles0 = None
+
         def reident(e: dict[str, EffectFit]) -> EffectFit | None:
             recs = [replace(r, u=pipe.stages(e, ri)["x_eff"]) for ri, r in enumerate(prep.records)]
             try:
-                n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order)
+                n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order,
+                                       init_poles=poles0)
             except (ValueError, np.linalg.LinAlgError):
                 return None
             return make_linear(n2, d2)
 
         if name == "time_delay":
             # a delay trades off against the model's time constants: profile it, re-identifying
-            # the linear model at each delay of a grid (alternating fits would lock in)
-            best_e, best_c = None, np.inf
-            for d in np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, max(fit.theta[0], 0.2 * pipe.span_s, 2 * prep.dt_s), 10)])):
-                e = {**base, name: EffectFit(name, "input", (float(d),))}
-                lin = reident(e)
-                if lin is None:
-                    continue
-                e[LINEAR] = lin
-                for _ in range(2):  # the other effects of the base follow the new linear part
-                    for k2 in [k for k in base if k != LINEAR]:
-                        f2 = fit_family(pipe, {k: v for k, v in e.items() if k != k2}, k2)
-                        if f2 is not None:
-                            e[k2] = f2
-                c = scores(e)[0]
-                if c < best_c:
-                    best_e, best_c = e, c
-            return best_e
+            # the linear model at each delay of a grid, then refine between the best's
+            # neighbours (alternating fits would lock in)
+            cache: dict[float, tuple[float, dict | None]] = {}
+
+            def at(d: float) -> float:
+                d = float(d)
+                if d not in cache:
+                    e = {**base, name: EffectFit(name, "input", (d,))}
+                    lin = reident(e)
+                    if lin is None:
+                        cache[d] = (np.inf, None)
+                    else:
+                        e[LINEAR] = lin
+                        for _ in range(2):  # the other effects of the base follow the new linear part
+                            for k2 in [k for k in base if k != LINEAR]:
+                                f2 = fit_family(pipe, {k: v for k, v in e.items() if k != k2}, k2)
+                                if f2 is not None:
+                                    e[k2] = f2
+                        cache[d] = (scores(e)[0], e)
+                return cache[d][0]
+
+            d_hi = max(fit.theta[0], min(0.2 * pipe.span_s, 5.0 * pipe.t_dom), 2 * prep.dt_s)
+            grid = np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, d_hi, 8)]))
+            costs = [at(d) for d in grid]
+            i = int(np.argmin(costs))
+            lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+            if hi_ > lo_:
+                optimize.minimize_scalar(at, bounds=(lo_, hi_), method="bounded",
+                                         options={"maxiter": 8, "xatol": 0.02 * (hi_ - lo_)})
+            best = min(cache.values(), key=lambda ce: ce[0])
+            return best[1]
         for _ in range(2):
             f = fit_family(pipe, eff, name)
             if f is None:
@@ -612,9 +645,3 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     plots = {"arrays": arrays, "pipe": pipe, "current": current}
     return Verdict(effects=named, where=where, heldout=heldout_d, noise_floor_nrmse=floor, model=model_d,
                    rounds=rounds, working_rate_hz=prep.rate_hz, export=export, plots=plots, elapsed_s=elapsed)
-
-
-def stderr_progress(msg: str) -> None:
-    """Progress printer for the CLI (stderr)."""
-    sys.stderr.write(f"hasel diagnose: {msg}\n")
-    sys.stderr.flush()

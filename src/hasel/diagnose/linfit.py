@@ -160,17 +160,22 @@ def _minimum_phase(num: np.ndarray) -> bool:
     return bool(np.all(np.real(z) <= 1e-6 * np.maximum(np.abs(z), 1e-12)))
 
 
-def _fit_order(prep: Prepared, n: int) -> tuple[np.ndarray, np.ndarray, float]:
+def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     # modes slower than a twentieth of the log are offsets or drifts, not dynamics it can identify
     w_lo = 20.0 / (prep.records[0].t_s[-1] - prep.records[0].t_s[0] + 1e-9)
     w_hi = 0.45 * np.pi * prep.rate_hz
     starts = []
-    try:
-        starts.append(_arx_poles(prep, n))
-    except (np.linalg.LinAlgError, ValueError):
-        pass
-    w_exc = 2 * np.pi * min(max(prep.f_excited_hz, 1e-6), 0.4 * prep.rate_hz)
-    starts.append(-np.geomspace(max(w_lo * 1.5, w_exc / 30.0), max(w_exc, w_lo * 3.0), n) + 0j)
+    n_train = sum(int(r.train.sum()) for r in prep.records)
+    if init is not None and np.asarray(init).size == n:
+        starts.append(np.asarray(init, complex))  # a warm start (alone on long logs, to save time)
+    if not starts or n_train < 5000:
+        try:
+            starts.append(_arx_poles(prep, n))
+        except (np.linalg.LinAlgError, ValueError):
+            pass
+        w_exc = 2 * np.pi * min(max(prep.f_excited_hz, 1e-6), 0.4 * prep.rate_hz)
+        starts.append(-np.geomspace(max(w_lo * 1.5, w_exc / 30.0), max(w_exc, w_lo * 3.0), n) + 0j)
+    iters = 30 if (init is not None and n_train >= 5000) else 80
     def make_cost(n_real: int):
         def cost(th: np.ndarray) -> float:
             try:
@@ -189,7 +194,7 @@ def _fit_order(prep: Prepared, n: int) -> tuple[np.ndarray, np.ndarray, float]:
         if best is not None and c0 > 100 * best[0]:
             continue
         res = optimize.minimize(cost, th0, method="Nelder-Mead",
-                                options={"maxiter": 80 * th0.size, "xatol": 1e-2, "fatol": 1e-9})
+                                options={"maxiter": iters * th0.size, "xatol": 1e-2, "fatol": 1e-9})
         th, c = (res.x, res.fun) if res.fun <= c0 else (th0, c0)
         if best is None or c < best[0]:
             best = (c, th, n_real)
@@ -207,8 +212,8 @@ def _fit_order(prep: Prepared, n: int) -> tuple[np.ndarray, np.ndarray, float]:
     return num, den, sse if np.isfinite(sse) else np.inf
 
 
-def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | None = None
-               ) -> tuple[np.ndarray, np.ndarray, dict]:
+def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | None = None,
+               init_poles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Identify a stable, strictly proper continuous model ``num/den`` from the training samples.
 
     Parameters
@@ -219,6 +224,8 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
         Largest number of poles tried.
     orders : tuple of int, optional
         Exactly these numbers of poles (instead of ``1 .. max_order``).
+    init_poles : ndarray, optional
+        Poles (rad/s) to start from (a quick refinement) for the order of their number.
 
     Returns
     -------
@@ -232,7 +239,7 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
     for n in (orders or range(1, max_order + 1)):
         try:
             with np.errstate(all="ignore"):
-                num, den, sse = _fit_order(prep, n)
+                num, den, sse = _fit_order(prep, n, init_poles)
         except (np.linalg.LinAlgError, ValueError, BadInputError):
             continue
         if not np.isfinite(sse):

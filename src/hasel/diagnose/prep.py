@@ -262,8 +262,10 @@ class LinearSim:
                                 f"to be simulated; poles {np.round(p, 4).tolist()}")
         self.num, self.den = num, den
         self.dc_gain = float(np.polyval(num, 0.0) / np.polyval(den, 0.0))
+        num = np.trim_zeros(num, "f") if np.any(num) else num[-1:]
         try:
-            with np.errstate(all="ignore"):
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", signal.BadCoefficients)
                 self.sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
             if not np.all(np.isfinite(self.sos)):
                 raise ValueError("non-finite sections")
