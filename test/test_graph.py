@@ -93,3 +93,15 @@ def test_laser_loop_matches_an_independent_python_control_model():
     assert ours["rise_s"] == pytest.approx(ref.rise_s, rel=0.05)
     assert ours["settling_s"] == pytest.approx(ref.settling_s, rel=0.1)
     assert ours["overshoot_pct"] == pytest.approx(ref.overshoot_pct, abs=1.5)
+
+
+def test_calibration_through_the_graph_recovers_the_sensor_line():
+    from hasel.loop import default_calibration
+    from hasel_sysid.calibrate import calibrate
+
+    fit = calibrate([2.0, 3.0, 4.0, 5.0, 6.0, 7.0], 0.4, quiet=True)
+    ideal = default_calibration()  # the simulated sensor's true line: 0.4 mm/us, -40 mm
+    assert fit.calibration.slope_mm_per_us == pytest.approx(ideal.slope_mm_per_us, rel=2e-3)
+    assert fit.calibration.offset_mm == pytest.approx(ideal.offset_mm, abs=0.1)
+    assert fit.max_error_pct < 0.5
+    np.testing.assert_allclose(fit.laser_mm, [2, 3, 4, 5, 6, 7], atol=0.02)  # the loop held each point
