@@ -13,8 +13,9 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from hasel_driver.rosutil import from_stamp, topic_qos
+from hasel_driver.rosutil import from_stamp
 from hasel_msgs.msg import ControllerState, VoltageCommand
 
 INSTALL = Path(__file__).resolve().parents[1] / "install"
@@ -42,12 +43,13 @@ class Probe:
         self.applied: list[tuple[float, float, int]] = []
         self.states: list[ControllerState] = []
         self.diags: list[str] = []
+        # a deep reader queue: on a loaded machine the probe may lag, and nothing may be lost
+        deep = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
         self.node.create_subscription(VoltageCommand, "/amp/applied", lambda m: self.applied.append(
-            (from_stamp(m.header.stamp), m.applied_kv, m.reason)), topic_qos("/amp/applied"))
-        self.node.create_subscription(ControllerState, "/controller/state", self.states.append,
-                                      topic_qos("/controller/state"))
+            (from_stamp(m.header.stamp), m.applied_kv, m.reason)), deep)
+        self.node.create_subscription(ControllerState, "/controller/state", self.states.append, deep)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.diags.extend(
-            s.message for s in m.status), topic_qos("/diagnostics"))
+            s.message for s in m.status), deep)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
 
