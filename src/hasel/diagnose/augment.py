@@ -788,8 +788,12 @@ _FITTERS = {
 }
 
 
-def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str) -> EffectFit | None:
+def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str,
+               init: EffectFit | None = None) -> EffectFit | None:
     """Fit the augmentation ``name`` on the training samples with ``effects`` held fixed.
+
+    ``init`` (a previous fit of the same family) lets the families searched by a grid and
+    a nonlinear refinement (asymmetric dynamics, load) skip the grid: a warm start.
 
     Returns
     -------
@@ -798,6 +802,9 @@ def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str) -> Effe
     """
     base = {k: v for k, v in effects.items() if k != name}
     try:
+        if init is not None and init.name == name and name in ("asymmetric_dynamics", "load_mass"):
+            lo, hi = family_bounds(pipe, init)
+            return _refine(pipe, base, init, lo, hi, max_nfev=10)
         return _FITTERS[name](pipe, base)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError):
         return None

@@ -73,7 +73,12 @@ class DiagnoseOptions:
     pair_pool : int
         In the second round, pairs among this many best single effects are fitted too.
     pair_alternate : int
-        The most promising pairs whose two fits are alternated (each refitted given the other).
+        The most promising pairs whose two fits are alternated (each refitted given the
+        other), from both orders.
+    pair_joint : int
+        Of those, the best few (by training error) refined jointly before the choice.
+    pair_joint_nfev : int
+        Iterations of that refinement.
     swap_ratio : float
         An earlier choice is swapped for another family when that lowers the held-out
         mean squared error below this ratio.
@@ -110,6 +115,8 @@ class DiagnoseOptions:
     top_k: int = 8
     pair_pool: int = 5
     pair_alternate: int = 6
+    pair_joint: int = 2
+    pair_joint_nfev: int = 6
     swap_ratio: float = 0.97
     min_nominal_share: float = 0.03
     near_all_gain: float = 0.5
@@ -530,23 +537,41 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                 results += try_all({a[2]: a[3]}, [b[2] for b in pool[i + 1:]])
             results.sort(key=lambda r: (r[0], r[1]))
             # sequential fits of a pair can lock the first effect into soaking up the second:
-            # alternate (refit each given the other) for the most promising pairs
-            improved = []
-            for r in results[:opts.pair_alternate]:
-                eff = dict(r[6])
-                names_ = [k for k in eff if k != LINEAR]
+            # alternate (refit each given the other) for the most promising pairs, from both
+            # orders, then refine the best few jointly
+            def alternate(eff: dict[str, EffectFit], names_: list[str]) -> dict[str, EffectFit]:
                 for _ in range(2):
                     for nm in names_:
-                        f2 = fit_family(pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm)
+                        f2 = fit_family(pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm, init=eff.get(nm))
                         if f2 is not None:
                             trial = {**eff, nm: f2}
                             if scores(trial)[0] <= scores(eff)[0]:
                                 eff = trial
+                return eff
+
+            improved = []
+            for r in results[:opts.pair_alternate]:
+                names_ = [k for k in r[6] if k != LINEAR]
+                fixed = {k: v for k, v in r[6].items() if k == LINEAR}
+                tries = [alternate(dict(r[6]), names_)]
+                if len(names_) == 2:  # the other order: the second effect fitted alone first
+                    b, a = names_
+                    fa = fit_family(pipe, fixed, a)
+                    fb = fit_family(pipe, {**fixed, a: fa}, b) if fa is not None else None
+                    if fb is not None:
+                        tries.append(alternate({**fixed, a: fa, b: fb}, [a, b]))
+                eff = min(tries, key=lambda e: scores(e)[0])
+                improved.append((scores(eff)[0], r, eff))
+            improved.sort(key=lambda x: x[0])
+            for i, (_, r, eff) in enumerate(improved):
+                if i < opts.pair_joint:
+                    eff = joint_refine(pipe, eff, max_nfev=opts.pair_joint_nfev)
                 m_tr2, m_ho2, e2 = scores(eff)
                 if m_ho2 < r[0]:
-                    say(f"  {' + '.join(eff):40s} held-out NRMSE {to_nrmse(m_ho2):.4f} (alternating fits)")
-                    improved.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
-            results = sorted(results + improved, key=lambda r: (r[0], r[1]))
+                    say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} held-out NRMSE {to_nrmse(m_ho2):.4f} "
+                        f"(alternating{' and joint' if i < opts.pair_joint else ''} fits)")
+                    results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+            results.sort(key=lambda r: (r[0], r[1]))
         if not results:
             break
         m_ho, k, name, fit, m_tr, e_new, eff_new = pick(results)
