@@ -165,3 +165,20 @@ def test_bad_models_are_bad_input():
         diagnose(t, u, y, model={"num": [1.0]})
     with pytest.raises(BadInputError, match="identify must be"):
         diagnose(t, u, y, options=DiagnoseOptions(identify="magic"))
+
+
+def test_change_between_repeats_is_noise_for_the_nominal_and_a_trend_with_drift():
+    from hasel.signals import protocol_schedule
+
+    sched = protocol_schedule([3.0, 5.0], kind="paper", repeats=3, duration_s=5.0)
+    rng = np.random.default_rng(9)
+    out = {}
+    for name, effects in (("nominal", []), ("drift", [from_name("charge_drift", tau_s=30.0, gain_loss_per_kv=0.02)])):
+        act = TruthActuator(effects)
+        act.reset(0.0)
+        y = act.run(sched.command_kv).stroke_mm + 0.003 * rng.standard_normal(sched.t_s.size)
+        v = diagnose(sched.t_s, sched.command_kv, y, model=_nominal(), options=DiagnoseOptions(max_effects=1))
+        out[name] = v.where["time"]["repeats"]
+    assert out["nominal"]["period_s"] == pytest.approx(5.0, rel=1e-3)
+    assert out["nominal"]["over_noise"] == pytest.approx(1.0, abs=0.25)  # an independent check of the floor
+    assert out["drift"]["over_noise"] > 5.0 and out["drift"]["mean_change_per_period"] < 0  # the gain drains

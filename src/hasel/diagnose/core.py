@@ -278,6 +278,15 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
     return num, den, src
 
 
+def _repeat_text(tm: dict) -> str:
+    rp = tm.get("repeats") or {}
+    if rp.get("repeat_difference_rms") is None:
+        return ""
+    return (f"; between repeats of the excitation ({rp['period_s']:.3g} s apart) the residual changes by "
+            f"{rp['repeat_difference_rms']:.3g} rms ({rp['over_noise']:.1f} x noise), "
+            f"{rp['mean_change_per_period']:+.3g} on average")
+
+
 def _tau(x: float) -> str:
     return "0 s (at once)" if x < 1e-6 else f"{x:.3g} s"
 
@@ -312,8 +321,8 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
                                 f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}"),
         "charge_drift": lambda: (f"the residual varies slowly in time (slow share {100 * tm['slow_share']:.0f} %, trend "
-                         f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
-                         f"{fit.theta[0]:.3g} s), not its present level"),
+                                 f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
+                                 f"{fit.theta[0]:.3g} s), not its present level" + _repeat_text(tm)),
     }[name]()
     txt = f"{sig}; removes {100 * gain:.0f} % of the held-out residual energy"
     if runner_up is not None:
