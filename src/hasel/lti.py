@@ -136,9 +136,12 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
         C, D = C @ Ad, C @ Bd
     pd = linalg.eigvals(Ad)
     zd = _ss_zeros(Ad, Bd, C, D)
-    dc = float((C @ np.linalg.solve(np.eye(n) - Ad, Bd) + D)[0, 0])
     zd, pd = _clean_roots(zd), _clean_roots(pd)
-    kd = dc * float(np.real(np.prod(1.0 - pd) / np.prod(1.0 - zd)))
+    # the gain, by matching the state space at a generic point (not z = 1, where a zero at
+    # s = 0 would leave nothing to match)
+    z0 = 1.7 + 0.3j
+    g0 = (C @ np.linalg.solve(z0 * np.eye(n) - Ad, Bd) + D)[0, 0]
+    kd = float(np.real(g0 * np.prod(z0 - pd) / np.prod(z0 - zd)))
     sos = signal.zpk2sos(zd, pd, kd)
     # zpk2sos pads missing zeros with zeros at z = 0, which would advance the output;
     # the discrete system has its relative degree as pure delay, so shift those sections.

@@ -114,3 +114,11 @@ def test_constant_block_path_equals_sosfilt():
     for u in rng.uniform(0, 9, 200):
         np.testing.assert_allclose(a.run_constant(float(u), 50), b.run(np.full(50, u)), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(a.zi, b.zi, rtol=1e-9, atol=1e-12)
+
+
+def test_zero_at_the_origin():
+    # a differentiating numerator (zero at s = 0): no DC gain to match the discrete gain on
+    num, den = [1.0, 0.0], [1.0, 3.0, 2.0]
+    u = np.sin(np.arange(500) * 0.05)
+    y = signal.sosfilt(zoh_sos(num, den, 0.01), u)
+    np.testing.assert_allclose(y, _reference_zoh(num, den, 0.01, u), atol=1e-10)
