@@ -137,9 +137,10 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
     pd = linalg.eigvals(Ad)
     zd = _ss_zeros(Ad, Bd, C, D)
     zd, pd = _clean_roots(zd), _clean_roots(pd)
-    # the gain, by matching the state space at a generic point (not z = 1, where a zero at
-    # s = 0 would leave nothing to match)
-    z0 = 1.7 + 0.3j
+    # the gain, by matching the state space at DC (z = 1), or at a generic point when a
+    # zero or pole sits at z = 1 (s = 0) and leaves nothing to match there
+    near_one = np.concatenate([zd, pd])
+    z0 = 1.0 if near_one.size == 0 or np.min(np.abs(1.0 - near_one)) > 1e-9 else 1.7 + 0.3j
     g0 = (C @ np.linalg.solve(z0 * np.eye(n) - Ad, Bd) + D)[0, 0]
     kd = float(np.real(g0 * np.prod(z0 - pd) / np.prod(z0 - zd)))
     sos = signal.zpk2sos(zd, pd, kd)
