@@ -4,6 +4,8 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
+from hasel.datasets import datasets_dir
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -15,7 +17,7 @@ from mcap_ros2.decoder import DecoderFactory
 from hasel.io.cdr import CdrError, Extractor, compile_extractor, encode, numeric_fields
 from hasel.io.msgdefs import MessageDefinitionError, message_definition, parse_schema
 
-ROSBAG2 = Path("/work/shared/datasets/rosbag2")
+ROSBAG2 = datasets_dir() / "rosbag2"
 SEP = "\n" + "=" * 80 + "\n"
 COMPLEX = ("std_msgs/Header header\nbool flag\nuint8 small\nfloat64 value\nint64[3] fixed\nfloat32[<=5] bounded\n"
            "Inner inner\nInner[] inners\nstring[] names\nuint64 big\nchar c\nbyte b\nint8 i8\nuint16 u16\n"

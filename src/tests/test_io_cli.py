@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from hasel.datasets import datasets_dir
+
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -11,7 +13,7 @@ from mcap.reader import make_reader
 from hasel.cli import main
 from hasel.io import Ros2McapWriter, encode
 
-ROSBAG2 = Path("/work/shared/datasets/rosbag2")
+ROSBAG2 = datasets_dir() / "rosbag2"
 
 
 @pytest.fixture

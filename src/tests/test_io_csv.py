@@ -4,6 +4,8 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from hasel.datasets import datasets_dir
+
 import numpy as np
 import pytest
 import scipy.io
@@ -11,7 +13,7 @@ import scipy.io
 from hasel.errors import BadInputError, DataFileError
 from hasel.io import load_io
 
-DATA = Path("/work/shared/datasets")
+DATA = datasets_dir()
 
 
 @pytest.fixture

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hasel.datasets import datasets_dir
+
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -14,7 +16,7 @@ from hasel.io import (
 )
 
 BATCH = "hasel_msgs/msg/SampleBatch"
-ROSBAG2 = Path("/work/shared/datasets/rosbag2")
+ROSBAG2 = datasets_dir() / "rosbag2"
 
 
 def _stamp(t_ns):

@@ -5,6 +5,10 @@ import json
 import sys
 from pathlib import Path
 
+from hasel.datasets import datasets_dir
+
+REPO = Path(__file__).resolve().parents[2]  # the repository root
+
 import pytest
 from mcap.reader import make_reader
 
@@ -12,7 +16,7 @@ from hasel.io.msgdefs import (
     DELIMITER, MessageDefinitionError, message_definition, parse_msg, parse_schema, short_name, type_hash,
 )
 
-ROSBAG2 = Path("/work/shared/datasets/rosbag2")
+ROSBAG2 = datasets_dir() / "rosbag2"
 SEP = "\n" + "=" * 80 + "\n"
 
 
@@ -70,11 +74,11 @@ def test_dependencies_depth_first_sorted_each_once(tmp_path):
 
 
 def _installed(rel: str) -> str:
-    for prefix in (Path("/work/main/install/hasel_msgs"), Path(sys.prefix)):
+    for prefix in (REPO / "install" / "hasel_msgs", Path(sys.prefix)):
         p = prefix / "share" / rel
         if p.is_file():
             return p.read_text()
-    return (Path("/work/main") / rel).read_text()
+    return (REPO / rel).read_text()
 
 
 def test_sample_batch_definition_layout():
@@ -99,7 +103,7 @@ def test_missing_type_names_the_type_and_where_it_looked(tmp_path):
 
 
 def test_type_hash_is_rosidls():
-    path = Path("/work/main/install/hasel_msgs/share/hasel_msgs/msg/SampleBatch.json")
+    path = REPO / "install/hasel_msgs/share/hasel_msgs/msg/SampleBatch.json"
     if not path.is_file():
         pytest.skip("hasel_msgs not built")
     want = json.loads(path.read_text())["type_hashes"][0]["hash_string"]
