@@ -226,7 +226,8 @@ class Ros2McapWriter:
     Notes
     -----
     Not thread-safe: call from one thread (or hold a lock). ``close()`` is idempotent;
-    call it from the shutdown path (also after SIGINT/SIGTERM) to write the summary.
+    call it from the shutdown path after SIGINT/SIGTERM (not inside the signal handler: a
+    handler can interrupt write() between records) to write the summary.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, chunk_size: int = DEFAULT_CHUNK_SIZE,
@@ -388,7 +389,7 @@ class Ros2McapWriter:
         off = len(buf)
         if not off:
             self._deadline = log_time_ns + self._span_ns
-        try:  # one += per record: a signal handler calling close() never sees half a record
+        try:  # one += per record
             buf += _MSG_HEAD(5, 22 + len(data), channel_id, sequence, log_time_ns, publish_time_ns) + data
         except struct.error as err:
             raise BadInputError(f"bad message fields (times must be uint64 ns, sequence uint32): {err}") from err
@@ -514,7 +515,7 @@ class Ros2McapWriter:
         if self._closed:
             return
         try:
-            self._reindex()  # close() may interrupt write() (signal handler): trust the records only
+            self._reindex()  # rebuild the indexes from the records themselves
             self._close_chunk()
             self._emit(_record(DataEnd(data_section_crc=self._crc)))
             summary_start = self._pos
