@@ -145,6 +145,7 @@ def run_replay(args: argparse.Namespace) -> int:
 
 def run_record(args: argparse.Namespace) -> int:
     """CLI: ``hasel record -o FILE.mcap [--topics a,b] [--duration S]``: until Ctrl-C/SIGTERM or the duration."""
+    from rclpy._rclpy_pybind11 import RCLError
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     from hasel_sysid.recorder_node import RecorderNode
@@ -162,10 +163,13 @@ def run_record(args: argparse.Namespace) -> int:
     # the spin below with ExternalShutdownException; the file is then closed in finally
     end = None if args.duration is None else time.monotonic() + args.duration
     try:
-        while end is None or time.monotonic() < end:
+        while rclpy.ok() and (end is None or time.monotonic() < end):
             ex.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        if rclpy.ok():
+            raise  # a real failure, not the signal's shutdown racing the wait set
     finally:
         node.destroy_node()  # closes the file: summary and footer
         rclpy.try_shutdown()
