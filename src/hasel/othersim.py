@@ -334,9 +334,9 @@ class FohSystem:
 
 
 def _leaky(x: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
-    """First-order low-pass ``tau dq/dt = x - q`` from ``q = 0`` (exact for held samples)."""
+    """First-order low-pass ``tau dq/dt = x - q`` from ``q(0) = 0``, exact for each sample held over its step."""
     a = math.exp(-dt_s / tau_s)
-    return signal.lfilter([1.0 - a], [1.0, -a], x)
+    return signal.lfilter([0.0, 1.0 - a], [1.0, -a], x)
 
 
 def _loaded_den(den: np.ndarray, mass_ratio: float) -> np.ndarray:
