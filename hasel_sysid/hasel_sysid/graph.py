@@ -164,9 +164,10 @@ class NodeGraph:
         checks = [lambda: p.timing_pub.get_subscription_count() >= 1,
                   lambda: self.config.feedback != "laser" or p.laser_pub.get_subscription_count() >= 1,
                   lambda: d.pub.get_subscription_count() >= 1,
-                  lambda: a.applied_pub.get_subscription_count() >= 2]
+                  lambda: a.applied_pub.get_subscription_count() >= 1 + (self.collector in self.nodes)]
         if c is not None:
-            checks += [lambda: f.pub.get_subscription_count() >= 1,
+            # the filtered strain feeds the controller only with strain feedback
+            checks += [lambda: f.pub.get_subscription_count() >= (self.config.feedback == "strain"),
                        lambda: c.cmd_pub.get_subscription_count() >= 1,
                        lambda: self.reference is None or len(c.references) == len(self.config.sequence_mm)]
         deadline = time.monotonic() + timeout_s
