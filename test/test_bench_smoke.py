@@ -47,6 +47,11 @@ def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
     assert res["2_core_loop"]["max_abs_diff_mm"] < 1e-6  # lsim and the loop's plant agree
     r5 = res["5_ident_recording"]
     assert r5["identify_vs_load"]["files"] == 3 and r5["recorder_vs_bare"]["recorder_bytes"] > 0
+    fl = res["floor"]  # the empty ring: five hops a round, and a ceiling that follows from it
+    assert fl["hop_us"] == pytest.approx(fl["round_us"] / 5) and fl["round_cpu_us"] > 0
+    assert fl["tick_floor_us"] == pytest.approx(fl["round_us"] + fl["hop_us"] + fl["sim_step_us"])
+    assert fl["speed_ceiling"] == pytest.approx(5000.0 / fl["tick_floor_us"])
+    assert any(r["figure"].startswith("1 ceiling") for r in doc["table"])
     assert not (tmp_path / "cache").exists()  # the campaign cache lives for the run only
     f = res["8_fuzz"]
     assert f["cases"] > 0 and f["cases"] == f["ok"] + f["rejected"] + f["crashed"] + len(f["hangs"])

@@ -9,7 +9,12 @@ Figures (each measured against its baseline in the same run where one exists):
    time worked with each executor (one output per 5 ms tick on the exact grid).
    Also the executor callbacks per simulated tick (every delivery of every message,
    and the timers on the simulated clock) and the wall time per callback: lockstep
-   runs them one after another, so their product sets the speed.
+   runs them one after another, so their product sets the speed. And the ceiling
+   of any graph of this shape on this machine
+   (:func:`~hasel_sysid.bench_graph.ring_floor`): five nodes that do nothing but
+   pass one message around, one more hop for ``/clock``, and one step of the plant
+   simulation; ``period / that`` is the most a lockstep graph of five nodes can
+   reach, with and without the plant's own cost.
 2. The offline core closed loop (:func:`hasel.loop.run_closed_loop`): simulated
    seconds per wall second, against ``scipy.signal.lsim`` of the same loop's plant on
    the same input.
@@ -21,7 +26,8 @@ Figures (each measured against its baseline in the same run where one exists):
 4. Scale: namespaced loops in two worker processes (each hosting half of them in one
    ``EventsExecutor``), counts raised until a count misses 0.1 % of its periods or a
    loop's p99 latency exceeds 2 ms; the CPU used at each count; baseline the largest
-   count that held, in one process.
+   count that held, in one process. And the ceiling: the loops the machine's cores
+   could hold if each cost only the CPU of figure 1's empty ring and a plant step.
 5. Identification of the paper's campaign (3 actuators x 6 offsets x 60 s at 10 kHz,
    written to MCAP without the graph and cached under ``out/`` for the run only)
    against merely loading the same files; the recorder node's message path against
@@ -181,6 +187,22 @@ def _fig1(b: _Bench) -> None:
     ok = ev["sim_time_ok"] and st["sim_time_ok"]
     b.row("1 simulated time works (5 ms grid, all samples)", "yes" if ok else "NO", "-", None,
           "both executors", ok)
+    fl = _ring_floor(b)
+    bare = 1e6 * _period_s() / (fl["round_us"] + fl["hop_us"])
+    b.row("1 ceiling: empty 5-node ring + /clock hop, + plant step", f"{fl['speed_ceiling']:.1f}x",
+          f"{bare:.1f}x (no plant step)", ev["speed"] / fl["speed_ceiling"], ">= 40x", None)
+
+
+def _ring_floor(b: _Bench) -> dict[str, Any]:
+    """The empty-ring floor of a tick (measured once per run, shared by figures 1 and 4)."""
+    fl = b.results.get("floor")
+    if fl is None:
+        from hasel_sysid.bench_graph import ring_floor
+
+        b.say("1/4: floor of a tick: an empty 5-node ring and one plant step")
+        fl = b.results["floor"] = ring_floor(5, 1000 if b.quick else 5000, b.domain)
+        fl["load_avg"] = _load()
+    return fl
 
 
 def _fig2(b: _Bench) -> None:
@@ -282,6 +304,11 @@ def _fig4(b: _Bench) -> None:
     per = [s["cpu_cores"] / s["n"] for s in curve if s["held"]]
     b.row("4 CPU cores used by n loops (n:cores)", cpu, "-", None,
           f"{100 * (sum(per) / len(per)):.1f} % core/loop" if per else "-", None)
+    fl = _ring_floor(b)
+    cores = os.cpu_count() or 1
+    ceiling = cores * 1e6 * _period_s() / fl["cpu_per_loop_floor_us"]
+    b.row("4 ceiling: loops if each cost only its empty ring + plant step", f"{ceiling:.0f}",
+          f"{fl['cpu_per_loop_floor_us']:.0f} us CPU per tick, {cores} cores", None, ">= 32", None)
 
 
 def _fig5(b: _Bench) -> None:

@@ -11,6 +11,13 @@
   subscription callback: receive time from the node's clock, then
   :class:`~hasel.io.writer.Ros2McapWriter`) against a bare ``mcap.writer.Writer``
   writing the same serialised bytes with the same chunk size, both uncompressed.
+- :func:`ring_floor`: the least a tick can cost on this machine with this stack: an
+  empty ring of ``n`` nodes passing one message around (each callback only
+  re-publishes what it got), with the same executor, plus the plant's own 10 kHz
+  simulation of one period (:class:`hasel.simulator.PlantSimulator`, no ROS). Any
+  graph in which every node of the loop handles every tick costs at least that, so
+  ``period / floor`` is a ceiling on its simulated-time speed and
+  ``cores * period / cpu_floor`` a ceiling on the loops that fit on the machine.
 """
 from __future__ import annotations
 
@@ -24,7 +31,7 @@ import numpy as np
 
 from hasel import paper
 
-__all__ = ["graph_speed", "recorder_vs_bare", "bench_messages"]
+__all__ = ["graph_speed", "recorder_vs_bare", "bench_messages", "ring_floor"]
 
 _BATCH = "hasel_msgs/msg/SampleBatch"
 _LOOP_TOPICS = ("/clock", "/sensor/timing", "/laser/stroke", "/strain/stroke", "/strain/stroke_filtered",
@@ -176,3 +183,97 @@ def recorder_vs_bare(n_messages: int = 20000, repeats: int = 3, domain_id: int =
     n = len(msgs)
     return {"messages": n, "recorder_us": 1e6 * best_rec / n, "bare_us": 1e6 * best_bare / n,
             "ratio": best_rec / best_bare, "recorder_bytes": sizes[0], "bare_bytes": sizes[1]}
+
+
+def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executor: str = "events",
+               sim_ticks: int = 2000) -> dict[str, Any]:
+    """The cheapest possible tick: an empty ring of ``n_nodes`` nodes, plus one plant step.
+
+    Parameters
+    ----------
+    n_nodes : int
+        Nodes in the ring (the loop's plant, driver, filter, controller, amplifier: 5).
+    rounds : int
+        Messages sent around the ring (after 200 rounds of warm-up).
+    domain_id : int
+        ROS domain of the ring.
+    executor : {"events", "single"}
+        Executor of the ring (one, in one process).
+    sim_ticks : int
+        Periods the plant simulator is stepped for its own cost.
+
+    Returns
+    -------
+    dict
+        ``round_us`` and ``round_cpu_us`` (wall and process CPU time per round, DDS threads
+        included), ``hop_us``, ``sim_step_us`` (one 5 ms period of the 10 kHz plant and its
+        sensors), ``tick_floor_us`` (a round, one more hop for ``/clock``, and a plant
+        step), ``speed_ceiling`` (simulated s per wall s) and ``cpu_per_loop_floor_us``.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+    from rclpy.task import Future
+
+    from hasel.simulator import PlantSimulator
+    from hasel_msgs.msg import Stroke
+    from hasel_sysid.graph import make_executor
+
+    if n_nodes < 1 or rounds < 1:
+        raise ValueError("the ring needs at least one node and one round")
+
+    class _Hop(Node):
+        def __init__(self, i: int, ctx: Context) -> None:
+            super().__init__(f"ring_hop{i}", context=ctx)
+            self.pub = self.create_publisher(Stroke, f"ring{(i + 1) % n_nodes}", QoSProfile(depth=10))
+            self.create_subscription(Stroke, f"ring{i}", self.on_message, QoSProfile(depth=10))
+            self.count, self.stop_after, self.done = 0, 0, None
+
+        def on_message(self, msg: Stroke) -> None:
+            self.count += 1
+            if self.done is not None and self.count >= self.stop_after:
+                self.done.set_result(self.count)
+                return
+            self.pub.publish(msg)
+
+    ctx = Context()
+    rclpy.init(args=["--ros-args", "--log-level", "warn"], context=ctx, domain_id=domain_id)
+    nodes: list[_Hop] = []
+    try:
+        nodes = [_Hop(i, ctx) for i in range(n_nodes)]
+        ex = make_executor(executor, ctx)
+        for n in nodes:
+            ex.add_node(n)
+        deadline = time.monotonic() + 10.0
+        while not all(n.pub.get_subscription_count() for n in nodes):
+            if time.monotonic() > deadline:
+                raise RuntimeError("the ring did not connect within 10 s")
+            ex.spin_once(timeout_sec=0.01)
+        head = nodes[0]
+        for count in (200, rounds):  # warm-up, then the measured stretch
+            head.done, head.count, head.stop_after = Future(), 0, count
+            w0, c0 = time.perf_counter(), time.process_time()
+            head.pub.publish(Stroke())
+            ex.spin_until_future_complete(head.done, timeout_sec=120.0)
+            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            if not head.done.done():
+                raise RuntimeError("the ring lost its message")
+        ex.shutdown()
+    finally:
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    sim = PlantSimulator(seed=0)
+    sim.step(1.0)
+    w0 = time.perf_counter()
+    for k in range(sim_ticks):
+        sim.step(3.0 + 0.001 * (k % 100))
+    step_us = 1e6 * (time.perf_counter() - w0) / sim_ticks
+    round_us, round_cpu_us = 1e6 * wall / rounds, 1e6 * cpu / rounds
+    hop_us = round_us / n_nodes
+    floor = round_us + hop_us + step_us
+    return {"n_nodes": n_nodes, "rounds": rounds, "executor": executor, "round_us": round_us,
+            "round_cpu_us": round_cpu_us, "hop_us": hop_us, "sim_step_us": step_us, "tick_floor_us": floor,
+            "speed_ceiling": 1e6 * paper.LOOP_PERIOD_S / floor,
+            "cpu_per_loop_floor_us": round_cpu_us + step_us}
