@@ -616,7 +616,8 @@ def _diagnose_file(job: tuple[str, bool]) -> dict:
             "effects": [{k: e[k] for k in ("name", "params", "evidence", "nrmse_after", "gap_removed")}
                         for e in v.effects],
             "rounds": [{k: r.get(k) for k in ("round", "best", "gain", "z", "accepted")}
-                       | {"top": [(c["name"], c["nrmse_heldout"]) for c in r["candidates"][:4]]}
+                       | {"top": [(c.get("name"), c.get("nrmse_heldout", c.get("nrmse_validation")))
+                                 for c in r.get("candidates", [])[:4]]}
                        for r in v.rounds],
             "model_source": v.model.get("source"), "seconds": time.perf_counter() - t0}
 

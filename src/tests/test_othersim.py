@@ -169,3 +169,29 @@ def test_end_to_end_delay_is_diagnosed():
     assert v.names[:1] == ["time_delay"]
     assert v.effects[0]["params"]["delay_s"] == pytest.approx(0.018, rel=0.1)
     assert v.heldout["nrmse_augmented"] < 0.2 * v.heldout["nrmse_nominal"]
+
+
+def test_case_mix_covers_every_name_and_kind():
+    labels = o._draw_labels(28, np.random.default_rng(1))
+    assert sum(not lab for lab in labels) == 6 and sum(len(lab) == 2 for lab in labels) == 6
+    singles = {lab[0] for lab in labels if len(lab) == 1}
+    assert {(n, k) for n, ks in o.EFFECT_KINDS.items() for k in ks} <= singles
+
+
+def test_score_reveals_labels_and_counts():
+    def case(i, effs):
+        return o.ForeignCase(i, i, tuple(o.ForeignEffect(n, o.EFFECT_KINDS[n][0]) for n in effs), 500.0, 0.01,
+                             {}, f"p{i}")
+
+    cases = [case(0, []), case(1, []), case(2, ["hysteresis"]), case(3, ["time_delay"]),
+             case(4, ["saturation", "load_mass"]), case(5, ["saturation", "charge_drift"])]
+    named = [[], ["charge_drift"], ["hysteresis", "load_mass"], ["load_mass"],
+             ["load_mass", "time_delay", "saturation"], ["charge_drift", "saturation"]]
+    res = [{"path": f"p{i}", "names": n, "nrmse_nominal": 0.1, "nrmse_augmented": 0.1 - 0.02 * i, "floor": 0.0,
+            "seconds": 1.0} for i, n in enumerate(named)]
+    s = o.score(cases, res)
+    assert s["false_alarms"] == 1 and s["n_none"] == 2
+    assert s["top1_accuracy"] == pytest.approx(2 / 4)  # cases 0 and 2
+    assert s["pair_both_named"] == pytest.approx(1.0) and s["pair_first_two"] == pytest.approx(0.5)
+    assert s["confusion"]["time_delay"] == {"load_mass": 1}
+    assert s["median_shrink"] == pytest.approx(np.median([0.4, 0.6, 0.8, 1.0]))
