@@ -30,6 +30,23 @@ def test_graph_equals_offline_loop_sample_for_sample(feedback):
     np.testing.assert_allclose(s["t_s"], ref.sample_t_s, rtol=0, atol=1e-9)
 
 
+def _clock_subscriptions(g: NodeGraph) -> int:
+    return sum(s.topic_name == "/clock" for n in g.nodes for s in n.subscriptions)
+
+
+def test_one_clock_subscription_drives_every_nodes_simulated_clock():
+    with NodeGraph(GraphConfig(sequence_mm=[2.0], hold_s=1.0, seed=3)) as g:
+        assert _clock_subscriptions(g) == 1
+        g.run(0.2, wall_timeout_s=60)
+        now_ns = g.plant.tick_stamp_ns()
+        assert now_ns == 200_000_000
+        for n in g.nodes:  # still on simulated time, each at the plant's last tick
+            assert n.get_parameter("use_sim_time").value is True
+            assert n.get_clock().now().nanoseconds == now_ns, n.get_name()
+    with NodeGraph(GraphConfig(sequence_mm=[2.0], hold_s=1.0, seed=3, shared_clock=False)) as g:
+        assert _clock_subscriptions(g) == len(g.nodes)  # rclpy's default: one per node
+
+
 @pytest.mark.parametrize("feedback", ["laser", "strain"])
 def test_steps_give_finite_metrics_for_all_four_steps(feedback):
     res = run_steps(feedback, [2.0, 4.0, 6.0, 4.0, 2.0], 0.5, quiet=True)
