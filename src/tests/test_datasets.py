@@ -84,17 +84,32 @@ def test_silverbox_cubic_stiffness_is_a_static_nonlinearity():
 
 
 @needs_data
-def test_cascaded_tanks_gap_found_with_the_static_map_among_the_best_candidates():
-    # the Torricelli outflow makes the tanks' gains and time constants depend on the level;
-    # no generic augmentation captures that well, so this asserts less than the others: a
-    # large gap, cut by most of it on the separate validation record, with the static map
-    # among the two best single effects of the first round (the verdict itself names a
-    # changed load first: see the report of the issue)
+def test_cascaded_tanks_overflow_is_named_saturation_beside_the_static_map():
+    # the overflow clips the level at 10 V: the measured output piles up on that value while the
+    # linear model goes beyond it; the Torricelli outflow makes the gains and time constants depend
+    # on the level, which the static map covers in part (and the offset the identified model leaves out)
     est, val = D.load_cascaded_tanks()
     v = diagnose(est.t_s, est.u, est.y, heldout=(val.t_s, val.u, val.y), units=("V", "V"),
-                 options=DiagnoseOptions(max_effects=1))
+                 options=DiagnoseOptions(max_effects=1))  # the clip check comes on top of the rounds
     h = v.heldout
     assert h["split"] == "separate held-out log" and h["nrmse_nominal"] > 1.0
-    assert h["nrmse_augmented"] < 0.3 * h["nrmse_nominal"]
-    first = [c["name"] for c in v.rounds[0]["candidates"][:2]]
-    assert "static_nonlinearity" in first
+    assert h["nrmse_augmented"] < 0.4 * h["nrmse_nominal"]
+    assert {"saturation", "static_nonlinearity"} <= set(v.names)
+    sat = next(e for e in v.effects if e["name"] == "saturation")["params"]
+    assert sat["acts_on"] == "output" and sat["upper"] == pytest.approx(10.0)
+    assert v.where["level"]["clipped_output"]["upper"]["samples"] == 47
+
+
+@needs_data
+def test_piezo_without_a_model_shows_hysteresis():
+    # identified first, a linear model takes the loop's first harmonic as a phase lag; what it cannot
+    # take (the loop's odd harmonics, the rest level below the loop's centre) is a rate-independent memory
+    d = D.load_piezo()
+    # 100 Hz is a hundred times the excitation; two effects and a small pair pool keep the test short
+    v = diagnose(d.t_s, d.u, d.y, units=("V", "um"),
+                 options=DiagnoseOptions(target_rate_hz=100.0, max_effects=2, pair_pool=3))
+    assert v.names[0] == "hysteresis"
+    assert v.heldout["nrmse_augmented"] < 0.5 * v.heldout["nrmse_nominal"]
+    hy = v.effects[0]["params"]
+    # the loop is about 15 % of the 39 um peak-to-peak wide (README): half-width in volts through the gain
+    assert hy["loop_half_width"] > 0.0 and hy["initial_branch"] < 0.0  # it rests below the loop's centre

@@ -48,14 +48,21 @@ def test_prepare_rate_split_and_blocks():
     p = prepare(t, u, u)
     r = p.records[0]
     assert 150.0 <= p.rate_hz <= 500.0 and p.rate_hz * p.decimation == pytest.approx(10_000.0)
-    assert r.train.sum() + r.hold.sum() == r.u.size and not np.any(r.train & r.hold)
-    assert 0.25 < r.hold.mean() < 0.4
+    # three disjoint parts: training, validation (choices), final (reported)
+    parts = np.vstack([r.train, r.valid, r.hold]).astype(int)
+    assert np.all(parts.sum(axis=0) == 1)
+    assert 0.6 < r.train.mean() < 0.75 and 0.12 < r.valid.mean() < 0.22 and 0.12 < r.hold.mean() < 0.22
     # block means: exactly the mean of each group of original samples
     np.testing.assert_allclose(r.u[:3], u[:3 * p.decimation].reshape(3, -1).mean(axis=1))
-    # held-out blocks never touch each other
-    edges = np.flatnonzero(np.diff(r.hold.astype(int)))
-    runs = np.diff(np.concatenate([[0], edges + 1, [r.u.size]]))
-    assert runs.min() >= 2
+    # no two non-training blocks touch: every non-training run is bordered by training samples
+    d = np.diff(np.concatenate([[0], (~r.train).astype(int), [0]]))
+    for s0, s1 in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):  # [s0, s1) a non-training run
+        assert r.valid[s0:s1].all() or r.hold[s0:s1].all()
+    # a separate held-out log is the final part; the first log keeps one block in three to validate
+    p2 = prepare(t, u, u, heldout=(t, u, u))
+    r0, r1 = p2.records
+    assert r1.hold.all() and not r1.valid.any() and not r0.hold.any()
+    assert 0.25 < r0.valid.mean() < 0.4 and np.all(r0.train ^ r0.valid)
 
 
 def test_prepare_rejects_unusable_logs():
@@ -182,3 +189,48 @@ def test_change_between_repeats_is_noise_for_the_nominal_and_a_trend_with_drift(
     assert out["nominal"]["period_s"] == pytest.approx(5.0, rel=1e-3)
     assert out["nominal"]["over_noise"] == pytest.approx(1.0, abs=0.25)  # an independent check of the floor
     assert out["drift"]["over_noise"] > 5.0 and out["drift"]["mean_change_per_period"] < 0  # the gain drains
+
+
+def test_flat_extremes_find_a_clip_and_not_quantised_noise():
+    from hasel.diagnose.prep import flat_extremes
+
+    rng = np.random.default_rng(4)
+    t = np.arange(4000) / 100.0
+    y = 5.0 + 6.0 * np.sin(2 * np.pi * 0.1 * t) + 0.05 * rng.standard_normal(t.size)
+    clipped = np.minimum(y, 10.0)
+    found = flat_extremes(clipped)
+    assert set(found) == {"upper"} and found["upper"][0] == 10.0
+    assert found["upper"][1].sum() == np.sum(y >= 10.0)
+    assert flat_extremes(np.round(y / 0.01) * 0.01) == {}  # quantised noise spreads over many values
+
+
+def test_an_output_clip_is_named_saturation_at_the_measured_value():
+    # a first-order system whose sensor clips at 1.2: the output piles up there while the model goes beyond
+    rng = np.random.default_rng(6)
+    rate = 200.0
+    t = np.arange(int(60 * rate)) / rate
+    u = np.repeat(rng.uniform(0.0, 1.6, 60), int(rate))
+    num, den = [2.0], [1.0, 2.0]
+    y = np.minimum(LinearSim(num, den, rate).run(u), 1.2) + 0.005 * rng.standard_normal(t.size)
+    y = np.minimum(y, 1.2)
+    v = diagnose(t, u, y, model=(num, den), options=DiagnoseOptions(max_effects=1))
+    assert v.names[0] == "saturation"
+    p = v.effects[0]["params"]
+    assert p["acts_on"] == "output" and p["upper"] == pytest.approx(1.2)
+    assert v.heldout["nrmse_augmented"] < 0.3 * v.heldout["nrmse_nominal"]
+
+
+def test_drift_is_told_from_a_static_map_by_the_change_between_repeats():
+    # the offsets rise with time, so the drift's level part looks like a static map; between repeats
+    # of the excitation (same input), only a drift changes the output
+    from hasel.signals import protocol_schedule
+
+    sched = protocol_schedule([2.0, 4.0, 6.0], kind="paper", repeats=3, duration_s=4.0)
+    rng = np.random.default_rng(12)
+    act = TruthActuator([from_name("static_nonlinearity", kind="electrostatic", strength=0.3),
+                         from_name("charge_drift", tau_s=20.0, gain_loss_per_kv=0.01, offset_mm_per_kv=0.05)])
+    act.reset(0.0)
+    y = act.run(sched.command_kv).stroke_mm + 0.003 * rng.standard_normal(sched.t_s.size)
+    v = diagnose(sched.t_s, sched.command_kv, y, model=_nominal(), units=("kV", "mm"))
+    assert {"static_nonlinearity", "charge_drift"} <= set(v.names[:2])
+    assert v.where["time"]["repeats"]["over_noise"] > 3.0

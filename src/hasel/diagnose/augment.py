@@ -15,7 +15,10 @@ static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (d
                                             normalised input and output
 hysteresis          input                   Prandtl-Ishlinskii:
                                             ``x + sum_j w_j (play_rj(x) - x)``,
-                                            ``w_j >= 0``, five fixed thresholds
+                                            ``w_j >= 0``, five fixed thresholds, the
+                                            plays starting at ``x_0 + c r_j``
+                                            (``c`` in [-1, 1]: the branch the log
+                                            starts on; a memory of what came before)
 load_mass           model                   inertia of G's resonances (or its slowest
                                             real pole) times ``1 + mu``, gain ``kappa``
 asymmetric_dynamics output                  first-order lag, one time constant while
@@ -42,10 +45,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
-from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s
-from hasel.effects.operators import asymmetric_lag, play, scale_resonances
+from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
+from hasel.effects.operators import asymmetric_lag, monotone_runs, play, scale_resonances
 
-__all__ = ["EffectFit", "Pipeline", "fit_family", "joint_refine", "family_bounds", "FAMILIES", "HYST_THRESHOLDS",
+__all__ = ["EffectFit", "Pipeline", "fit_family", "fit_drift_on_repeats", "joint_refine", "family_bounds", "FAMILIES",
+           "HYST_THRESHOLDS",
            "describe_params", "LINEAR", "INPUT_SIDE", "make_linear", "split_linear"]
 
 #: Effect names in chain order of their (first) slot.
@@ -140,6 +144,8 @@ class Pipeline:
         self.thresholds = tuple(2.0 * self.u_s * f for f in HYST_THRESHOLDS)
         self.n_evals = 0
         self.max_degree = _max_degree(u, self.u_s)
+        # the measured output piling up on its extreme (a clip): that value is a candidate limit
+        self.clips = {end: v for end, (v, _) in flat_extremes(self.prep.records[0].y).items()}
 
     @property
     def span_s(self) -> float:
@@ -193,9 +199,16 @@ class Pipeline:
             self._cache[key] = v
         return v
 
-    def plays(self, ri: int, x: np.ndarray, key: tuple) -> list[np.ndarray]:
-        """Play operators of the fixed thresholds on ``x`` (cached under ``key``)."""
-        return self._memo(("plays", ri) + key, lambda: list(play(x, np.asarray(self.thresholds), float(x[0]))))
+    def plays(self, ri: int, x: np.ndarray, key: tuple, branch: float = 0.0) -> list[np.ndarray]:
+        """Play operators of the fixed thresholds on ``x`` (cached under ``key``), each starting at
+        ``x[0] + branch r_j`` (``branch`` -1: on the rising branch, as after a rise to ``x[0]``;
+        0: centred; 1: on the falling branch)."""
+        def make() -> list[np.ndarray]:
+            if branch == 0.0:
+                return list(play(x, np.asarray(self.thresholds), float(x[0])))
+            return [play(x, r, float(x[0]) + branch * r) for r in self.thresholds]
+
+        return self._memo(("plays", ri, round(float(branch), 12)) + key, make)
 
     def stages(self, effects: dict[str, EffectFit], ri: int, upto: int = 99) -> dict[str, np.ndarray]:
         """Intermediate signals of record ``ri`` through the chain (up to slot ``upto``, exclusive).
@@ -227,9 +240,9 @@ class Pipeline:
         out["x_map"] = x
         f = e.get("hysteresis")
         if f is not None:
-            ps = self.plays(ri, x, key)
+            ps = self.plays(ri, x, key, _branch(f))
             k2 = key + ("h",) + f.theta
-            x = x + sum(w * (p - x) for w, p in zip(f.theta, ps))
+            x = x + sum(w * (p - x) for w, p in zip(f.theta[:len(HYST_THRESHOLDS)], ps))
             key = k2
         out["x_eff"] = x
         f = e.get("load_mass")
@@ -486,7 +499,8 @@ def _ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, nonneg: bool = 
     return sol / scale
 
 
-def _fit_scalar(pipe: Pipeline, effects: dict[str, EffectFit], make, grid: np.ndarray) -> EffectFit | None:
+def _fit_scalar(pipe: Pipeline, effects: dict[str, EffectFit], make, grid: np.ndarray,
+                maxiter: int = 20) -> EffectFit | None:
     """Best of ``make(v)`` over ``grid`` then a bounded refinement between its neighbours."""
     if grid.size == 0:
         return None
@@ -496,7 +510,7 @@ def _fit_scalar(pipe: Pipeline, effects: dict[str, EffectFit], make, grid: np.nd
     hi = grid[min(i + 1, grid.size - 1)]
     if hi > lo:
         res = optimize.minimize_scalar(lambda v: _sse(pipe, _with(effects, make(float(v)))), bounds=(lo, hi),
-                                       method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 20})
+                                       method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": maxiter})
         if res.fun <= costs[i]:
             return make(float(res.x))
     return make(float(grid[i]))
@@ -518,9 +532,14 @@ def _fit_saturation(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit 
     qs = np.array([0.6, 0.75, 0.85, 0.92, 0.96, 0.98, 0.99, 0.995])
     for side, sig in (("input", xs), ("output", ys)):
         for end in ("upper", "lower"):
-            grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
             variant = f"{side}:{end}"
-            fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)), grid)
+            if side == "output" and end in pipe.clips:
+                # the measured output piles up on this value: the limit is measured, not searched
+                fit = EffectFit("saturation", variant, (float(pipe.clips[end]),))
+            else:
+                grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
+                fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)),
+                                  grid)
             if fit is None:
                 continue
             c = _sse(pipe, _with(effects, fit))
@@ -637,18 +656,37 @@ def _fit_sensor(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | No
     return EffectFit("sensor_nonlinearity", "output", tuple(map(float, th)))
 
 
-def _fit_hysteresis(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
-    def basis(ri, st):
-        sim = pipe.linear_of(effects)
-        x = st["x_map"]
-        key = ("hfit",) + tuple(sorted((k, v.variant, v.theta) for k, v in effects.items() if v.slot < 3))
-        ps = pipe.plays(ri, x, key)
-        return [sim.run(p - x) for p in ps]
+def _reversals(pipe: Pipeline, u: np.ndarray) -> int:
+    """Turning points of the input, ignoring wiggles smaller than a tenth of its range (1-99 %)."""
+    return int(monotone_runs(play(u, 0.1 * pipe.u_s, float(u[0]))).size - 1)
 
-    th = _ls(pipe, effects, basis, nonneg=True)
-    fit = EffectFit("hysteresis", "input", tuple(map(float, th)))
-    if _downstream_nonlinear(effects, 3):
-        fit = _refine(pipe, effects, fit, 0.0, np.inf, max_nfev=25)
+
+def _branch(fit: EffectFit) -> float:
+    """The starting branch ``c`` of a hysteresis fit (0 for fits without one)."""
+    return float(fit.theta[len(HYST_THRESHOLDS)]) if len(fit.theta) > len(HYST_THRESHOLDS) else 0.0
+
+
+def _fit_hysteresis(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """Weights by non-negative least squares for each starting branch of a small grid, then the
+    branch refined between the best's neighbours: a log that starts after an unknown history
+    starts somewhere inside the loop (its rest level is not the loop's centre)."""
+    if min(_reversals(pipe, r.u) for r in pipe.prep.records if r.train.any()) < 2:
+        return None  # a loop needs the input to turn back and forth: a step or a ramp cannot show one
+    key = ("hfit",) + tuple(sorted((k, v.variant, v.theta) for k, v in effects.items() if v.slot < 3))
+
+    def at(c: float) -> EffectFit:
+        def basis(ri, st):
+            sim = pipe.linear_of(effects)
+            x = st["x_map"]
+            return [sim.run(p - x) for p in pipe.plays(ri, x, key, c)]
+
+        th = _ls(pipe, effects, basis, nonneg=True)
+        return EffectFit("hysteresis", "input", tuple(map(float, th)) + (float(c),))
+
+    fit = _fit_scalar(pipe, effects, at, np.array([-1.0, -0.5, 0.0, 0.5, 1.0]), maxiter=6)
+    if fit is not None and _downstream_nonlinear(effects, 3):
+        lo, hi = family_bounds(pipe, fit)
+        fit = _refine(pipe, effects, fit, lo, hi, max_nfev=25)
     return fit
 
 
@@ -721,6 +759,62 @@ def _fit_drift(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | Non
     return best  # no refinement on the full residual: that would undo the slow-only fit
 
 
+def fit_drift_on_repeats(pipe: Pipeline, effects: dict[str, EffectFit], period_s: float
+                         ) -> tuple[EffectFit, dict] | None:
+    """Charge drift fitted on the change of the residual between repeats of the excitation.
+
+    Where the input one period later is the same, a time-invariant model (any static map,
+    lag or memory that has settled) predicts the same output, so the change of the
+    residual between repeats is noise plus what varies in time: the drift's signature,
+    free of the level-dependent part that a static map can take over when the levels of
+    a log follow its history. The drift's weights are fitted by least squares on those
+    changes over training pairs (both samples training), for each time constant of a grid.
+
+    Returns
+    -------
+    (EffectFit, dict) or None
+        The fit and ``{"train": (sse_before, sse_after, n, ||fitted||^2), "valid": (...)}``
+        of the repeat changes (pairs with a validation sample and no final one); ``None`` when the
+        log has too few matching pairs.
+    """
+    rec = pipe.prep.records[0]
+    t, u = rec.t_s, rec.u
+    tp = t + period_s
+    inside = tp <= t[-1]
+    same = np.zeros(t.size, bool)
+    same[inside] = np.abs(np.interp(tp[inside], t, u) - u[inside]) <= 1e-3 * max(float(np.ptp(u)), 1e-300)
+    k = np.clip(np.round((tp - t[0]) * pipe.prep.rate_hz).astype(int), 0, t.size - 1)
+    pair_tr = same & rec.train & rec.train[k]
+    pair_va = same & (rec.valid | rec.valid[k]) & ~rec.hold & ~rec.hold[k]
+    if pair_tr.sum() < 50 or pair_va.sum() < 20:
+        return None
+    base = {k2: v for k2, v in effects.items() if k2 != "charge_drift"}
+    st = pipe.stages(base, 0)
+
+    def later(x: np.ndarray) -> np.ndarray:
+        return np.interp(tp, t, x) - x
+
+    d_r = later(rec.y - st["y"])
+    tau_min = _tau_min(pipe)
+    taus = np.unique(np.clip(pipe.span_s * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0]), tau_min, None))
+    best = None
+    for tau in taus:
+        q = pipe.charge(st["x_sat"], float(tau))
+        A = np.column_stack([later(st["y_asym"] * q), later(pipe.y_s * q)])
+        sol = np.linalg.lstsq(A[pair_tr], d_r[pair_tr], rcond=None)[0]
+        sse = sumsq(d_r[pair_tr] - A[pair_tr] @ sol)
+        if best is None or sse < best[0]:
+            best = (sse, float(tau), sol, A)
+    _, tau, sol, A = best
+    fit = EffectFit("charge_drift", "output", (tau, float(sol[0]), float(sol[1])))
+    fitted = A @ sol
+
+    def sse_pair(m: np.ndarray) -> tuple[float, float, int, float]:
+        return sumsq(d_r[m]), sumsq(d_r[m] - fitted[m]), int(m.sum()), sumsq(fitted[m])
+
+    return fit, {"train": sse_pair(pair_tr), "valid": sse_pair(pair_va)}
+
+
 def family_bounds(pipe: Pipeline, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of ``fit``'s parameters (for refinement)."""
     n = fit.n_params
@@ -729,7 +823,10 @@ def family_bounds(pipe: Pipeline, fit: EffectFit) -> tuple[np.ndarray, np.ndarra
     if fit.name == "time_delay":
         return np.zeros(1), np.array([_delay_max(pipe)])
     if fit.name == "hysteresis":
-        return np.zeros(n), inf
+        lo, hi = np.zeros(n), inf.copy()
+        if n > len(HYST_THRESHOLDS):
+            lo[len(HYST_THRESHOLDS)], hi[len(HYST_THRESHOLDS)] = -1.0, 1.0
+        return lo, hi
     if fit.name == "load_mass":
         return np.array([-0.8, 0.05]), np.array([10.0, 20.0])
     if fit.name == "asymmetric_dynamics":
@@ -848,9 +945,11 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
             out["output_offset_unit"] = uo
     elif fit.name == "hysteresis":
         out["thresholds"] = list(pipe.thresholds)
-        out["weights"] = list(th)
+        out["weights"] = list(th[:len(HYST_THRESHOLDS)])
         out["unit"] = ui
         out["loop_half_width"] = float(sum(w * r for w, r in zip(th, pipe.thresholds)))
+        out["initial_branch"] = _branch(fit)
+        out["initial_branch_note"] = "plays start at x0 + c*r: -1 rising branch, 0 centred, 1 falling branch"
     elif fit.name == "load_mass":
         out["mass_ratio"] = th[0]
         out["gain_factor"] = th[1]

@@ -8,10 +8,16 @@ continuous model is simulated with its input held over each interval and its out
 taken mid-interval (the mean of the states at the interval's ends): no half-sample
 delay either way, whether the samples were block means or instantaneous values.
 
-Without a separate held-out log, the record is cut into blocks (of jittered
-lengths) and one block of every three is held out (interleaved), so that training
-and held-out data both span the levels, directions and events of the log; models are always simulated over the
-whole record from its input alone and scored on the held-out samples only.
+Held-out data come in two parts, so that the reported figures are honest: a
+*validation* part, on which the diagnosis chooses (which effect, whether to accept
+it, how to rank), and a *final* part, never used in any choice, on which "how far"
+is reported. Without a separate held-out log, the record is cut into blocks (of
+jittered lengths) and one block of every three is held out (interleaved, never two
+held-out blocks in a row), the held-out blocks alternately validating and final, so
+that all three parts span the levels, directions and events of the log. With a separate held-out log,
+that log is the final part and one block of every three of the first log
+validates. Models are always simulated over the whole record from its input alone
+and scored on the masked samples only.
 
 The noise floor comes from the data: the residual's spectral level in the band
 above the excitation where nothing is excited (white-noise level times the working
@@ -29,7 +35,7 @@ from hasel.errors import BadInputError
 from hasel.lti import zoh_sos
 
 __all__ = ["Record", "Prepared", "LinearSim", "prepare", "estimate_noise", "excited_band_hz",
-           "dominant_time_constant_s", "nrmse"]
+           "dominant_time_constant_s", "nrmse", "flat_extremes"]
 
 
 def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
@@ -48,7 +54,9 @@ class Record:
     t_s, u, y : ndarray
         Times (s), input and output (their own units).
     train, hold : ndarray of bool
-        Samples used for fitting and for scoring.
+        Samples used for fitting, and the final held-out samples (reported, never chosen on).
+    valid : ndarray of bool or None
+        Validation samples (the diagnosis chooses on them); ``None``: none in this record.
     """
 
     t_s: np.ndarray
@@ -56,6 +64,11 @@ class Record:
     y: np.ndarray
     train: np.ndarray
     hold: np.ndarray
+    valid: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.valid is None:
+            self.valid = np.zeros(self.t_s.size, bool)
 
 
 @dataclass
@@ -89,7 +102,7 @@ class Prepared:
         return 1.0 / self.rate_hz
 
     def stacked(self, what: str, mask: str | None = None) -> np.ndarray:
-        """Concatenate ``what`` ("u", "y", "t_s") over the records, optionally masked ("train"/"hold")."""
+        """Concatenate ``what`` ("u", "y", "t_s") over the records, optionally masked ("train"/"valid"/"hold")."""
         parts = []
         for r in self.records:
             x = getattr(r, what)
@@ -147,6 +160,44 @@ def dominant_time_constant_s(den: np.ndarray) -> float:
     return float(1.0 / re.min()) if re.size and re.min() > 0 else float("inf")
 
 
+def flat_extremes(y: np.ndarray, min_count: int = 5, min_share: float = 0.005,
+                  pile_up: float = 3.0) -> dict[str, tuple[float, np.ndarray]]:
+    """Ends of the range where a measured signal piles up on one value: the signature of a clip.
+
+    A sensor or a physical limit that clips holds the signal at exactly its extreme value,
+    so the samples pile up there: at least ``min_count`` and ``min_share`` of all samples
+    sit at the extreme (within a millionth of the range), ``pile_up`` times as many as on
+    any other single value in the outer fifth of the range. Noise, quantised or not,
+    spreads the samples near an extreme over many values instead.
+
+    Parameters
+    ----------
+    y : ndarray
+        The measured signal.
+
+    Returns
+    -------
+    dict
+        ``{"upper"|"lower": (value, mask of the samples at it)}`` for the ends that clip.
+    """
+    y = np.asarray(y, float)
+    span = float(np.ptp(y)) if y.size else 0.0
+    out: dict[str, tuple[float, np.ndarray]] = {}
+    if span <= 0:
+        return out
+    tol = 1e-6 * span
+    for end, v in (("upper", float(y.max())), ("lower", float(y.min()))):
+        at = np.abs(y - v) <= tol
+        n = int(at.sum())
+        if n < max(min_count, min_share * y.size):
+            continue
+        outer = (y >= v - 0.2 * span) if end == "upper" else (y <= v + 0.2 * span)
+        _, counts = np.unique(y[outer & ~at], return_counts=True)
+        if counts.size == 0 or n >= pile_up * counts.max():
+            out[end] = (v, at)
+    return out
+
+
 def _block_mean(x: np.ndarray, q: int) -> np.ndarray:
     n = (x.size // q) * q
     return x[:n].reshape(-1, q).mean(axis=1)
@@ -176,6 +227,16 @@ def _interleave(n: int, n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
     return ~hold, hold
 
 
+def _split_runs(held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The contiguous runs of ``held`` dealt alternately to two masks (validation, final)."""
+    d = np.diff(np.concatenate([[0], held.astype(int), [0]]))
+    a = np.zeros(held.size, bool)
+    for k, (s0, s1) in enumerate(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))):
+        if k % 2 == 0:
+            a[s0:s1] = True
+    return a, held & ~a
+
+
 def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | None = None,
             model_den: np.ndarray | None = None, target_rate_hz: float | None = None,
             n_blocks: int = 30, max_samples: int = 60_000) -> Prepared:
@@ -194,7 +255,9 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         Force the working rate (rounded to a whole decimation factor).
     n_blocks : int
         Fewest interleaved blocks of a self-held-out split (one of every three is held
-        out); short logs get blocks of about twelve samples, up to 240 blocks.
+        out, alternately validating and final); short logs get blocks of about twelve
+        samples, up to 240 blocks. With a separate held-out log, the same blocks of the
+        first log, the held-out ones validating.
     max_samples : int
         Cap on working samples (the rate is lowered, never below 8 times the band).
 
@@ -228,11 +291,15 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         # blocks of about a dozen samples in short logs (an event such as a single step is then
         # shared by training and held-out data), up to 240 blocks in long ones
         nb = int(min(max(n_blocks, tw.size // 12), 240, max(6, tw.size // 20)))
-        tr, ho = _interleave(tw.size, nb)
-        records.append(Record(tw, uw, yw, tr, ho))
-        split = f"interleaved: one of every three of {nb} blocks held out"
+        tr, held = _interleave(tw.size, nb)
+        va, fi = _split_runs(held)
+        records.append(Record(tw, uw, yw, tr, fi, va))
+        split = (f"interleaved: one of every three of {nb} blocks held out, the held-out blocks alternately "
+                 f"validating (choices) and final (reported)")
     else:
-        records.append(Record(tw, uw, yw, np.ones(tw.size, bool), np.zeros(tw.size, bool)))
+        nb = int(min(max(n_blocks, tw.size // 12), 240, max(6, tw.size // 20)))
+        tr, va = _interleave(tw.size, nb)
+        records.append(Record(tw, uw, yw, tr, np.zeros(tw.size, bool), va))
         th, uh, yh = (_block_mean(x, q) for x in hold_log)
         records.append(Record(th, uh, yh, np.zeros(th.size, bool), np.ones(th.size, bool)))
         split = "separate held-out log"

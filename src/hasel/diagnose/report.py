@@ -197,8 +197,8 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     for rd in v.rounds:
         md.append(f"- round {rd['round']}: best {rd.get('best')} "
                   f"({'accepted' if rd.get('accepted') else 'rejected'}; removes {100 * rd.get('gain', 0):.1f} % "
-                  f"of the held-out residual, z {rd.get('z', 0):.1f})")
-        md += [f"    - {c['name']}: {c['nrmse_heldout']:.4f}" for c in rd["candidates"][:8]]
+                  f"of the validation residual, z {rd.get('z', 0):.1f})")
+        md += [f"    - {c['name']}: {c['nrmse_validation']:.4f}" for c in rd["candidates"][:8]]
     md += ["", "## Fitted parameters", ""]
     for e in v.effects:
         md.append(f"- **{e['name']}**: `{_short(e['params'])}`")
