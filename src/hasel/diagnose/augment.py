@@ -7,7 +7,10 @@ the simplest generic form that has the effect's *signature*, fitted to the data.
 name                slot in the chain       form (x input, y output, G the model)
 =================== ======================= =========================================
 time_delay          input                   x(t - d)
-saturation          input or output         clip at a lower or an upper limit
+saturation          input or output         clip at a lower or an upper limit; or
+                    measured (last)         the measured range where the output
+                                            piles up on its extremes (a sensor's
+                                            or a physical limit seen in the data)
 static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (degree 5),
                                             or (internal, a stiffness-like force)
                                             ``y + G1(s sum_j b_j w^j)``
@@ -30,7 +33,7 @@ sensor_nonlinearity output (last)           ``y + s sum_j c_j w^j`` (degree 5)
 =================== ======================= =========================================
 
 The chain order is: delay, input saturation, input map, hysteresis, G (with load),
-internal map, asymmetric lag, drift, output saturation, sensor map.
+internal map, asymmetric lag, drift, output saturation, sensor map, measured clip.
 :class:`Pipeline` simulates any combination with caching of the unchanged upstream
 stages; :func:`fit_family` fits one family's few parameters on the training samples
 with the others held fixed (linear least squares where the form is linear in its
@@ -48,7 +51,7 @@ from scipy import optimize, signal
 from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
 from hasel.effects.operators import asymmetric_lag, monotone_runs, play, scale_resonances
 
-__all__ = ["EffectFit", "Pipeline", "fit_family", "fit_drift_on_repeats", "joint_refine", "family_bounds", "FAMILIES",
+__all__ = ["EffectFit", "Pipeline", "fit_family", "fit_drift_on_repeats", "measured_clip", "joint_refine", "family_bounds", "FAMILIES",
            "HYST_THRESHOLDS",
            "describe_params", "LINEAR", "INPUT_SIDE", "make_linear", "split_linear"]
 
@@ -70,7 +73,7 @@ LINEAR = "_linear"
 INPUT_SIDE = ("time_delay", "saturation", "static_nonlinearity", "hysteresis")
 _SLOT = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "static_nonlinearity:input": 2, "hysteresis": 3,
          "load_mass": 4, "static_nonlinearity:internal": 5, "asymmetric_dynamics": 6, "charge_drift": 7,
-         "saturation:output": 8, "sensor_nonlinearity": 9}
+         "saturation:output": 8, "sensor_nonlinearity": 9, "saturation:measured": 10}
 
 
 @dataclass(frozen=True)
@@ -274,6 +277,9 @@ class Pipeline:
         if f is not None:
             w = (y - self.y_c) / self.y_s
             y = y + self.y_s * poly_map(f.theta, w)
+        f = e.get("saturation")
+        if f is not None and f.variant.startswith("measured"):
+            y = _clip(y, f)
         out["y"] = y
         self.n_evals += 1
         return out
@@ -405,7 +411,20 @@ def _shift(t: np.ndarray, x: np.ndarray, d: float) -> np.ndarray:
 
 
 def _clip(x: np.ndarray, f: EffectFit) -> np.ndarray:
+    if f.variant.endswith("both"):
+        return np.clip(x, f.theta[0], f.theta[1])
     return np.minimum(x, f.theta[0]) if f.variant.endswith("upper") else np.maximum(x, f.theta[0])
+
+
+def measured_clip(clips: dict[str, float]) -> EffectFit | None:
+    """The clip of the measured range at ``clips`` (``{"upper"|"lower": value}``), as a saturation
+    acting last in the chain (variant ``measured:upper|lower|both``), or ``None`` for no ends."""
+    if not clips:
+        return None
+    if len(clips) == 2:
+        return EffectFit("saturation", "measured:both", (float(clips["lower"]), float(clips["upper"])))
+    (end, v), = clips.items()
+    return EffectFit("saturation", f"measured:{end}", (float(v),))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -533,13 +552,8 @@ def _fit_saturation(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit 
     for side, sig in (("input", xs), ("output", ys)):
         for end in ("upper", "lower"):
             variant = f"{side}:{end}"
-            if side == "output" and end in pipe.clips:
-                # the measured output piles up on this value: the limit is measured, not searched
-                fit = EffectFit("saturation", variant, (float(pipe.clips[end]),))
-            else:
-                grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
-                fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)),
-                                  grid)
+            grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
+            fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)), grid)
             if fit is None:
                 continue
             c = _sse(pipe, _with(effects, fit))
@@ -840,8 +854,9 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
     """All parameters of ``effects`` refined together on the training samples (variants kept)."""
     if not effects:
         return effects
-    # the drift's weights stay as fitted on slow parts (see _fit_drift)
-    fixed = {k: v for k, v in effects.items() if k in (LINEAR, "charge_drift")}
+    # the drift's weights stay as fitted on slow parts (see _fit_drift), a measured range as measured
+    fixed = {k: v for k, v in effects.items()
+             if k in (LINEAR, "charge_drift") or v.variant.startswith("measured")}
     effects = {k: v for k, v in effects.items() if k not in fixed}
     if not effects:
         return fixed
@@ -920,9 +935,15 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
         out["delay_s"] = th[0]
     elif fit.name == "saturation":
         side, end = fit.variant.split(":")
-        out["acts_on"] = side
+        out["acts_on"] = "output" if side == "measured" else side
         out["unit"] = ui if side == "input" else uo
-        out["upper" if end == "upper" else "lower"] = th[0]
+        if end == "both":
+            out["lower"], out["upper"] = th[0], th[1]
+        else:
+            out["upper" if end == "upper" else "lower"] = th[0]
+        if side == "measured":
+            out["measured_range"] = True
+            out["note"] = "the measured output piles up on these values: applied last, to what is measured"
     elif fit.name in ("static_nonlinearity", "sensor_nonlinearity"):
         side = "output" if fit.name == "sensor_nonlinearity" else ("input" if fit.variant == "input" else "output")
         c, s = (pipe.u_c, pipe.u_s) if side == "input" else (pipe.y_c, pipe.y_s)

@@ -53,7 +53,7 @@ import numpy as np
 from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
-                                    fit_family, joint_refine, make_linear, split_linear)
+                                    fit_family, joint_refine, make_linear, measured_clip, split_linear)
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, prepare
 from hasel.diagnose.where import analyse
 from hasel.errors import BadInputError
@@ -318,6 +318,23 @@ def _repeat_text(tm: dict) -> str:
             f"{rp['mean_change_per_period']:+.3g} on average")
 
 
+def _fixed(name: str, fit: EffectFit) -> bool:
+    """A part of the chain that is not searched: a re-identified linear model, a measured clip."""
+    return name == LINEAR or fit.variant.startswith("measured")
+
+
+def _saturation_text(fit: EffectFit, lv: dict) -> str:
+    side, end = fit.variant.split(":")
+    if side == "measured":
+        clipped = lv.get("clipped_output", {})
+        ends = [e for e in ("lower", "upper") if e in clipped and (end == "both" or end == e)]
+        return ("the measured output piles up on " + " and ".join(
+            f"{clipped[e]['value']:.4g} ({clipped[e]['samples']} samples, its {e} end)" for e in ends)
+                + " while the model goes beyond: the measured range is clipped there")
+    return (f"the residual is confined to the {end} end of the {side} range: a hard limit at "
+            f"{fit.theta[0]:.4g}")
+
+
 def _tau(x: float) -> str:
     return "0 s (at once)" if x < 1e-6 else f"{x:.3g} s"
 
@@ -336,12 +353,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
                                 f"explain {100 * lv['share_instant_output']:.0f} %) applied after the dynamics: "
                                 f"an output-side map fits better than an input-side one"),
-        "saturation": lambda: (f"the residual is confined to the {fit.variant.split(':')[1]} end of the "
-                       f"{fit.variant.split(':')[0]} range: a hard limit at {fit.theta[0]:.4g}"
-                       + (f"; the measured output piles up on that value "
-                          f"({lv['clipped_output'][fit.variant.split(':')[1]]['samples']} samples) while the "
-                          f"nominal model goes beyond it" if fit.variant.startswith("output")
-                          and fit.variant.split(":")[1] in lv.get("clipped_output", {}) else "")),
+        "saturation": lambda: _saturation_text(fit, lv),
         "time_delay": lambda: (f"the residual tracks the nominal output's rate (correlation "
                        f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
                        f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
@@ -350,8 +362,11 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                       f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g})"),
         "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
-                       f"direction adds {100 * dr['extra_share']:.0f} % to the level's share) and a "
-                       f"rate-independent play-operator memory explains it"),
+                       f"direction adds {100 * dr['extra_share']:.0f} % to the level's share; at equal input "
+                       f"levels the input's direction adds {100 * dr.get('input_direction_extra_share', 0.0):.0f} %) "
+                       f"and a rate-independent play-operator memory explains it"
+                       + (f", the log starting on the {'rising' if fit.theta[-1] < 0 else 'falling'} branch "
+                          f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
                                 f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}"),
@@ -450,6 +465,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
 
     current: dict[str, EffectFit] = {}
     mse_tr, mse_ho, e_ho = scores(current)
+    clip0 = measured_clip(pipe.clips)
     mse_nom = mse_ho
     if identified_model:
         # a model identified here leaves the log's output offset out (for the static map to
@@ -463,6 +479,14 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     n_tr = prep.stacked("y", "train").size
     to_nrmse = lambda m: math.sqrt(max(m, 0.0) * y_ho.size / norm_ho)  # noqa: E731
     say(f"nominal NRMSE {nrmse_nom_va:.4f} (validation), {nrmse_nom:.4f} (final)")
+    if clip0 is not None:
+        # the measured output piles up on its extremes: every fit sees the model clipped there (a
+        # prediction beyond the measured range can only be further from what was measured); whether
+        # to name it is decided at the end
+        current = {"saturation": clip0}
+        mse_tr, mse_ho, e_ho = scores(current)
+        say(f"the measured output piles up on {', '.join(f'{v:.6g} ({k})' for k, v in pipe.clips.items())}: "
+            f"the fits see the model clipped there (validation NRMSE {to_nrmse(mse_ho):.4f})")
     rounds: list[dict] = []
     evidence_of: dict[str, tuple] = {}
 
@@ -614,7 +638,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             # single augmentation may be soaking up two effects' signatures
             pool = [r for r in singles[:opts.pair_pool] if r[2] not in current]
             for i, a in enumerate(pool):
-                results += try_all({a[2]: a[3]}, [b[2] for b in pool[i + 1:]])
+                results += try_all({**{k: v for k, v in current.items() if _fixed(k, v)}, a[2]: a[3]},
+                                   [b[2] for b in pool[i + 1:]])
             results.sort(key=lambda r: (r[0], r[1]))
             # sequential fits of a pair can lock the first effect into soaking up the second:
             # alternate (refit each given the other) for the most promising pairs, from both
@@ -631,8 +656,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
 
             improved = []
             for r in results[:opts.pair_alternate]:
-                names_ = [k for k in r[6] if k != LINEAR]
-                fixed = {k: v for k, v in r[6].items() if k == LINEAR}
+                names_ = [k for k, v in r[6].items() if not _fixed(k, v)]
+                fixed = {k: v for k, v in r[6].items() if _fixed(k, v)}
                 tries = [alternate(dict(r[6]), names_)]
                 if len(names_) == 2:  # the other order: the second effect fitted alone first
                     b, a = names_
@@ -691,7 +716,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         current = dict(eff_new)
         mse_tr, mse_ho, e_ho = m_tr, m_ho, e_new
         # swaps: with the newcomer in place, could an earlier choice be bettered by another family?
-        for old in [n for n in current if n not in (name, LINEAR)]:
+        for old in [n for n, v in current.items() if n != name and not _fixed(n, v)]:
             base = {k2: v for k2, v in current.items() if k2 != old}
             alts = try_all(base, [f for f in FAMILIES if f not in current])
             if alts and alts[0][0] < opts.swap_ratio * mse_ho:
@@ -732,7 +757,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             z_rep = (b0 - b1) / (2.0 * math.sqrt(2.0 * sigma2) * max(math.sqrt(fit2), 1e-300))
             trial = {**current, "charge_drift": drift}
             for _ in range(2):  # the other effects follow, no longer taking the drift's level part
-                for k2 in [k for k in current if k != LINEAR]:
+                for k2 in [k for k, v in current.items() if not _fixed(k, v)]:
                     f2 = fit_family(pipe, {kk: vv for kk, vv in trial.items() if kk != k2}, k2, init=trial[k2])
                     if f2 is not None:
                         trial[k2] = f2
@@ -743,28 +768,44 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                          f"repeat check: the residual changes between repeats ({rp['over_noise']:.1f} x noise); "
                          f"a drift explains {100 * share:.0f} % of that change above noise (z {z_rep:.1f})")
 
-    # a clip seen directly in the data: the output piles up on its extreme value while the model
-    # goes beyond it there (a one-signed residual at the top or bottom of the output range)
-    if pipe.clips and "saturation" not in current:
+    # a clip seen directly in the data (the output piles up on its extreme value) was part of every
+    # fit; it is named where the model goes beyond it there and clipping helps significantly
+    if "saturation" in current and current["saturation"].variant.startswith("measured"):
+        kept = {}
+        r0 = prep.records[0]  # the signature on the samples choices may see (training and validation)
+        seen = r0.train | r0.valid
+        without_all = {k2: v for k2, v in current.items() if k2 != "saturation"}
+        # the nominal model's prediction (with its training offset, if identified here) and the chosen
+        # model's without the clip: either going beyond the limit where the output sits on it
+        preds = [pipe.simulate({}, 0)[seen] + (nominal_offset if identified_model else 0.0),
+                 pipe.simulate(without_all, 0)[seen]]
         for end, limit in pipe.clips.items():
-            sat = EffectFit("saturation", f"output:{end}", (float(limit),))
-            r0 = prep.records[0]  # the signature on the samples choices may see (training and validation)
-            seen = r0.train | r0.valid
             at = (np.abs(r0.y - limit) <= 1e-6 * max(float(np.ptp(r0.y)), 1e-300))[seen]
-            # the nominal model's prediction (with its training offset, if identified here: the
-            # chosen effects may have bent to follow the clipped samples they were fitted on)
-            y_now = pipe.simulate({}, 0)[seen] + (nominal_offset if identified_model else 0.0)
-            beyond = (y_now > limit) if end == "upper" else (y_now < limit)
-            share = float(beyond[at].mean()) if at.any() else 0.0
-            trial = {**current, "saturation": sat}
-            _, m_ho, e_new = scores(trial)
-            delta = e_ho - e_new
-            z = float(np.sum(e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
-            ok = share >= opts.clip_share_min and m_ho < mse_ho and z >= opts.z_min
-            direct_check("clip_check", f"saturation (output {end} {limit:.6g})", trial, ok,
-                         {"share_beyond_at_clip": share, "clipped_samples": int(at.sum()), "z": z},
-                         f"clip check: the output piles up on {limit:.6g} ({end}); the nominal model goes beyond "
-                         f"it on {100 * share:.0f} % of those samples (z {z:.1f})")
+            share = max(float(((p > limit) if end == "upper" else (p < limit))[at].mean()) if at.any() else 0.0
+                        for p in preds)
+            others = {e2: v2 for e2, v2 in pipe.clips.items() if e2 != end}
+            base = dict(without_all)
+            if measured_clip(others) is not None:
+                base["saturation"] = measured_clip(others)
+            _, m_without, e_without = scores(base)
+            z = float(np.sum(e_without ** 2 - e_ho ** 2)
+                      / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(e_without - e_ho), 1e-300)))
+            ok = share >= opts.clip_share_min and mse_ho < m_without and z >= opts.z_min
+            rounds.append({"round": len(rounds) + 1, "clip_check": True, "end": end, "limit": float(limit),
+                           "share_beyond_at_clip": share, "clipped_samples": int(at.sum()), "z": z,
+                           "gain": (m_without - mse_ho) / m_without if m_without > 0 else 0.0,
+                           "accepted": bool(ok), "candidates": []})
+            say(f"clip check: the output piles up on {limit:.6g} ({end}); a model goes beyond it on "
+                f"{100 * share:.0f} % of those samples; clipping there removes {100 * rounds[-1]['gain']:.1f} % "
+                f"(z {z:.1f}) -> {'named' if ok else 'not named'}")
+            if ok:
+                kept[end] = limit
+        clip = measured_clip(kept)
+        current = dict(without_all)
+        if clip is not None:
+            current["saturation"] = clip
+            evidence_of["saturation"] = (max(r["gain"] for r in rounds if r.get("clip_check")), None)
+        mse_tr, mse_ho, e_ho = scores(current)
 
     if len(current) > 1 and opts.joint_refine:
         refined = joint_refine(pipe, current, max_nfev=opts.joint_refine_nfev)

@@ -16,7 +16,9 @@ variance that a simple description explains:
 - level: residual means in bins of the operating level (the input and the nominal
   output, each averaged over two time constants).
 - direction: extra share explained when each level bin is split by the direction
-  of the nominal output (rising = activation, falling = relaxation).
+  of the nominal output (rising = activation, falling = relaxation); and the same
+  at equal *input* levels split by the sign of the input's rate (a memory loop of
+  the input, such as hysteresis, shows there even when a lagging model hides it).
 - amplitude: residual RMS in bins of the local excitation amplitude.
 - delay signature: correlation of the residual with the nominal output's rate.
 """
@@ -306,7 +308,13 @@ def analyse(pipe: Pipeline, sigma2: float, noise_method: str) -> dict:
     out["level"] = {"share_input_level": share_u, "share_output_level": share_y,
                     "share_instant_output": share_inst, "by_input_level": table(bu, lvl_u),
                     "by_output_level": table(by, lvl_y), "level_window_s": float(w_lvl / fs)}
+    du_s = _movavg(np.gradient(u), max(w_lvl // 4, 1))
+    up_u = du_s > 0
+    inst_u = _quantile_bins(u, 10)
+    share_in = _share_binned(r, inst_u)
+    share_in_dir = _share_binned(r, inst_u * 2 + up_u) - share_in
     out["direction"] = {"extra_share": float(max(share_dir, 0.0)), "rising_minus_falling": up_down,
+                        "input_level_share": share_in, "input_direction_extra_share": float(max(share_in_dir, 0.0)),
                         "rising_minus_falling_over_noise": float(up_down / max(math.sqrt(sigma2), 1e-300)),
                         "rising_fraction": float(up.mean())}
     amp = np.sqrt(_movavg((u - lvl_u) ** 2, w_lvl))
