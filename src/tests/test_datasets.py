@@ -105,11 +105,14 @@ def test_piezo_without_a_model_shows_hysteresis():
     # identified first, a linear model takes the loop's first harmonic as a phase lag; what it cannot
     # take (the loop's odd harmonics, the rest level below the loop's centre) is a rate-independent memory
     d = D.load_piezo()
-    # 100 Hz is a hundred times the excitation; two effects and a small pair pool keep the test short
-    v = diagnose(d.t_s, d.u, d.y, units=("V", "um"),
-                 options=DiagnoseOptions(target_rate_hz=100.0, max_effects=2, pair_pool=3))
-    assert v.names[0] == "hysteresis"
+    # 100 Hz is a hundred times the excitation (keeps the test short)
+    v = diagnose(d.t_s, d.u, d.y, units=("V", "um"), options=DiagnoseOptions(target_rate_hz=100.0, max_effects=1))
+    assert v.names == ["hysteresis"]
     assert v.heldout["nrmse_augmented"] < 0.5 * v.heldout["nrmse_nominal"]
     hy = v.effects[0]["params"]
-    # the loop is about 15 % of the 39 um peak-to-peak wide (README): half-width in volts through the gain
-    assert hy["loop_half_width"] > 0.0 and hy["initial_branch"] < 0.0  # it rests below the loop's centre
+    assert hy["initial_branch"] < 0.0  # it rests below the loop's centre: it came there rising
+    # README: the loop is about 15 % of the 39 um peak-to-peak wide; the play operators' share of it
+    # (through the linear part's gain) is about half that here, the linear part keeping some phase lag
+    m = v.model.get("reidentified", v.model)
+    width = 2.0 * hy["loop_half_width"] * m["num"][-1] / m["den"][-1] / np.ptp(d.y)
+    assert 0.05 < width < 0.2

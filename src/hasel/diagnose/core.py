@@ -549,11 +549,11 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         if orders is not None and poles0.size != orders[0]:
             poles0 = None
 
-        def reident(e: dict[str, EffectFit]) -> EffectFit | None:
+        def reident(e: dict[str, EffectFit], warm_only: bool = False) -> EffectFit | None:
             recs = [replace(r, u=pipe.stages(e, ri)["x_eff"]) for ri, r in enumerate(prep.records)]
             try:
                 n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order,
-                                       init_poles=poles0)
+                                       init_poles=poles0, warm_only=warm_only and poles0 is not None)
             except (ValueError, np.linalg.LinAlgError):
                 return None
             return make_linear(n2, d2)
@@ -568,7 +568,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                 d = float(d)
                 if d not in cache:
                     e = {**base, name: EffectFit(name, "input", (d,))}
-                    lin = reident(e)
+                    lin = reident(e, warm_only=True)  # a profile: many small changes of one input
                     if lin is None:
                         cache[d] = (np.inf, None)
                     else:

@@ -160,7 +160,8 @@ def _minimum_phase(num: np.ndarray) -> bool:
     return bool(np.all(np.real(z) <= 1e-6 * np.maximum(np.abs(z), 1e-12)))
 
 
-def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None,
+               warm_only: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
     # modes slower than a twentieth of the log are offsets or drifts, not dynamics it can identify
     w_lo = 20.0 / (prep.records[0].t_s[-1] - prep.records[0].t_s[0] + 1e-9)
     w_hi = 0.45 * np.pi * prep.rate_hz
@@ -168,7 +169,7 @@ def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None) -> tuple[
     n_train = sum(int(r.train.sum()) for r in prep.records)
     if init is not None and np.asarray(init).size == n:
         starts.append(np.asarray(init, complex))  # a warm start (alone on long logs, to save time)
-    if not starts or n_train < 5000:
+    if not starts or (n_train < 5000 and not warm_only):
         try:
             starts.append(_arx_poles(prep, n))
         except (np.linalg.LinAlgError, ValueError):
@@ -213,7 +214,7 @@ def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None) -> tuple[
 
 
 def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | None = None,
-               init_poles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+               init_poles: np.ndarray | None = None, warm_only: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """Identify a stable, strictly proper continuous model ``num/den`` from the training samples.
 
     Parameters
@@ -226,6 +227,10 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
         Exactly these numbers of poles (instead of ``1 .. max_order``).
     init_poles : ndarray, optional
         Poles (rad/s) to start from (a quick refinement) for the order of their number.
+    warm_only : bool
+        Start from ``init_poles`` alone, also on short logs (which otherwise try the ARX
+        and spread starts too): for many small changes of the data, as a profile over a
+        delay makes.
 
     Returns
     -------
@@ -239,7 +244,7 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
     for n in (orders or range(1, max_order + 1)):
         try:
             with np.errstate(all="ignore"):
-                num, den, sse = _fit_order(prep, n, init_poles)
+                num, den, sse = _fit_order(prep, n, init_poles, warm_only)
         except (np.linalg.LinAlgError, ValueError, BadInputError):
             continue
         if not np.isfinite(sse):
