@@ -243,7 +243,9 @@ class Pipeline:
         out["x_map"] = x
         f = e.get("hysteresis")
         if f is not None:
-            ps = self.plays(ri, x, key, _branch(f))
+            # the starting branch is that of the log it was fitted on (record 0); another log's
+            # history is unknown: its plays start centred
+            ps = self.plays(ri, x, key, _branch(f) if ri == 0 else 0.0)
             k2 = key + ("h",) + f.theta
             x = x + sum(w * (p - x) for w, p in zip(f.theta[:len(HYST_THRESHOLDS)], ps))
             key = k2
