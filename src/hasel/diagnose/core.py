@@ -70,13 +70,13 @@ class DiagnoseOptions:
     max_effects : int
         Most effects named.
     min_first_gain, min_next_gain : float
-        Share of the held-out residual energy the first / each further effect must remove.
+        Share of the validation residual energy the first / each further effect must remove.
     min_gap_share : float
-        Share of the held-out residual energy *above the noise floor* it must remove.
+        Share of the validation residual energy *above the noise floor* it must remove.
     floor_margin : float
         No further effect once the validation NRMSE is within this factor of the floor.
     z_min : float
-        Paired z statistic of the held-out improvement.
+        Paired z statistic of the validation improvement.
     asym_ratio_min : float
         ``asymmetric_dynamics`` needs one time constant this many times the other.
     top_k : int
@@ -91,10 +91,10 @@ class DiagnoseOptions:
     pair_joint_nfev : int
         Iterations of that refinement.
     swap_ratio : float
-        An earlier choice is swapped for another family when that lowers the held-out
+        An earlier choice is swapped for another family when that lowers the validation
         mean squared error below this ratio.
     min_nominal_share : float
-        Share of the nominal model's held-out gap above the floor each effect must remove.
+        Share of the nominal model's validation gap above the floor each effect must remove.
     near_all_gain, min_nominal_share_near_all : float
         ...unless it removes at least ``near_all_gain`` of what is left, then this smaller share.
     clip_share_min : float
@@ -374,7 +374,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                                  f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
                                  f"{fit.theta[0]:.3g} s), not its present level" + _repeat_text(tm)),
     }[name]()
-    txt = f"{sig}; removes {100 * gain:.0f} % of the held-out residual energy"
+    txt = f"{sig}; removes {100 * gain:.0f} % of the validation residual energy"
     if runner_up is not None:
         txt += f" (next best: {runner_up[0]}, {100 * runner_up[1]:.0f} %)"
     return txt
@@ -610,7 +610,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         return min(tried, key=lambda e: scores(e)[0]) if tried else None
 
     def pick(results: list[tuple]) -> tuple:
-        """Lowest held-out error; near-ties (1 %) go to fewer parameters, then to the earlier family.
+        """Lowest validation error; near-ties (1 %) go to fewer parameters, then to the earlier family.
 
         The family order (FAMILIES) is the tie-break prior: an offset or a curvature that the
         data cannot place before or after the dynamics is read as the actuator's static map
@@ -689,7 +689,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         gap_share = (mse_ho - m_ho) / above if above > 0 else 0.0
         nominal_share = (mse_ho - m_ho) / max(mse_nom - sigma2, 1e-300)
         # against the noise floor: with white noise of variance sigma2 left in the current residual,
-        # the held-out SSE drop of a change delta has sd 2 sigma ||delta||
+        # the validation SSE drop of a change delta has sd 2 sigma ||delta||
         delta = e_ho - e_new
         z = float(np.sum(e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
         dbic = -(mse_tr - m_tr) * n_tr / sigma2 + k * math.log(n_tr)
@@ -830,7 +830,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                       "n_params": fit.n_params, "theta": list(fit.theta)})
 
     nrmse_aug = final_nrmse(current)
-    # exports over the held-out samples
+    # exports over the final held-out samples
     ts, meas, nom, aug = [], [], [], []
     for ri, rec in enumerate(prep.records):
         if rec.hold.any():
