@@ -442,7 +442,10 @@ def _train_target(pipe: Pipeline) -> tuple[list[np.ndarray], list[np.ndarray]]:
 
 
 def _downstream_nonlinear(effects: dict[str, EffectFit], slot: int) -> bool:
-    return any(f.slot > slot and f.name not in _LINEAR_STAGES for f in effects.values())
+    """Whether a stage after ``slot`` keeps a least-squares basis from being exact (a measured clip
+    does not count: it only touches the samples at the measured range's ends)."""
+    return any(f.slot > slot and f.name not in _LINEAR_STAGES and not f.variant.startswith("measured")
+               for f in effects.values())
 
 
 def sumsq(x: np.ndarray) -> float:
