@@ -398,7 +398,7 @@ def _fig6_foreign(b: _Bench, pct: Callable[[float | None], str]) -> None:
     """
     from hasel.othersim import run_othersim
 
-    n = 3 if b.quick else 12
+    n = 3 if b.quick else 10
     b.say(f"6: the diagnosis on an independent simulator's logs, {n} cases")
     s = run_othersim(n, seed=2, progress=lambda m: b.say("6: " + m.strip()), short=b.quick)
     cases = s.pop("cases", [])
@@ -502,7 +502,9 @@ def run(args: argparse.Namespace) -> int:
     b.say(f"figures {','.join(map(str, figures))}{' (quick)' if b.quick else ''}, ROS domain {b.domain}, "
           f"{os.cpu_count()} CPUs, load average {_load():.2f}")
     errors = {}
+    seconds = {}
     for n in figures:
+        t_fig = time.monotonic()
         try:
             _RUNNERS[n](b)
         except Exception as err:  # noqa: BLE001 - one figure failing must not hide the others
@@ -511,12 +513,13 @@ def run(args: argparse.Namespace) -> int:
             errors[n] = f"{type(err).__name__}: {err}\n{traceback.format_exc()}"
             b.row(f"{n} {FIGURES[n]}", "FAILED", "-", None, "-", False)
             b.say(f"{n}: failed: {type(err).__name__}: {err}")
+        seconds[str(n)] = time.monotonic() - t_fig
     table = format_table(b.rows)
     print(table)
     if b.quick:
         print("(--quick: short runs to check that every figure works; the targets apply to the full run)")
     doc = {"quick": b.quick, "figures": figures, "rt_priority": b.rt_priority, "wall_s": time.monotonic() - b.t0,
-           "cpus": os.cpu_count(), "domain_id": b.domain, "table": [asdict(r) for r in b.rows],
+           "seconds_per_figure": seconds, "cpus": os.cpu_count(), "domain_id": b.domain, "table": [asdict(r) for r in b.rows],
            "results": b.results, "errors": errors}
     with open(out, "w") as fh:
         json.dump(_json_safe(doc), fh, indent=1, allow_nan=False)
