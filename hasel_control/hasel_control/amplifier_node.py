@@ -47,6 +47,7 @@ class HvAmplifierNode(Node):
         self.last_reason = Reason.NONE
         self.tripped = False
         self.applied_pub = self.create_publisher(VoltageCommand, "amp/applied", topic_qos("/amp/applied"))
+        self._applied = VoltageCommand()
         self.batch_pub = self.create_publisher(SampleBatch, "amp/applied_batch", topic_qos("/amp/applied_batch"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
         self.create_subscription(VoltageCommand, "amp/command", self.on_command, topic_qos("/amp/command"))
@@ -66,8 +67,8 @@ class HvAmplifierNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _publish(self, stamp, requested: float, applied: float, reason: int) -> None:
-        msg = VoltageCommand(requested_kv=requested, applied_kv=applied, clamped=reason != Reason.NONE,
-                             reason=reason)
+        msg = self._applied  # one message object, refilled: publish() copies it at once
+        msg.requested_kv, msg.applied_kv, msg.clamped, msg.reason = requested, applied, reason != Reason.NONE, reason
         msg.header.stamp = stamp
         self.output_kv = applied
         self.applied_pub.publish(msg)

@@ -76,6 +76,7 @@ class PidControllerNode(Node):
         self.stale = False
         self.rejected = 0
         self.cmd_pub = self.create_publisher(VoltageCommand, "amp/command", topic_qos("/amp/command"))
+        self._cmd = VoltageCommand(applied_kv=math.nan, clamped=False)
         self.state_pub = self.create_publisher(ControllerState, "controller/state", topic_qos("/controller/state"))
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", topic_qos("/diagnostics"))
         fb_topic = declare(self, "feedback_topic", "", "override of the feedback topic ('' = from feedback)",
@@ -151,7 +152,8 @@ class PidControllerNode(Node):
 
     def _publish_command(self, stamp, kv: float) -> None:
         self.last_output_kv = kv
-        cmd = VoltageCommand(requested_kv=kv, applied_kv=math.nan, clamped=False)
+        cmd = self._cmd  # one message object, refilled: publish() copies it at once
+        cmd.requested_kv = kv
         cmd.header.stamp = stamp
         self.cmd_pub.publish(cmd)
 

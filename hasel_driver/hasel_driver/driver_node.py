@@ -36,6 +36,7 @@ class StrainDriverNode(Node):
                             else Calibration.line(slope, offset, "parameters"))
         self.add_on_set_parameters_callback(validate_with(self._check))
         self.pub = self.create_publisher(Stroke, out_topic, topic_qos("/strain/stroke"))
+        self._out = Stroke(source=Stroke.SOURCE_STRAIN)
         self.sub = self.create_subscription(SensorTiming, in_topic, self.on_timing, topic_qos("/sensor/timing"))
         self.get_logger().info(f"calibration {self.calibration.coeffs} ({self.calibration.source})")
 
@@ -51,7 +52,8 @@ class StrainDriverNode(Node):
         """Convert one reading; the output keeps the reading's stamp."""
         us = msg.elapsed_us
         z = float(self.calibration(us)) if math.isfinite(us) and us > 0.0 else math.nan
-        out = Stroke(stroke_mm=z, source=Stroke.SOURCE_STRAIN)
+        out = self._out  # one message object, refilled: publish() copies it at once
+        out.stroke_mm = z
         out.header = msg.header
         self.pub.publish(out)
 

@@ -35,12 +35,14 @@ class LowPassNode(Node):
         out_topic = declare(self, "output_topic", "strain/stroke_filtered", "filtered stroke")
         self.filter = LowPass(cutoff, rate)
         self.pub = self.create_publisher(Stroke, out_topic, topic_qos("/strain/stroke_filtered"))
+        self._out = Stroke(source=Stroke.SOURCE_STRAIN_FILTERED)
         self.sub = self.create_subscription(Stroke, in_topic, self.on_stroke, topic_qos("/strain/stroke"))
 
     def on_stroke(self, msg: Stroke) -> None:
         """Filter one sample; the output keeps its stamp."""
         z = self.filter(msg.stroke_mm) if math.isfinite(msg.stroke_mm) else math.nan
-        out = Stroke(stroke_mm=z, source=Stroke.SOURCE_STRAIN_FILTERED)
+        out = self._out  # one message object, refilled: publish() copies it at once
+        out.stroke_mm = z
         out.header = msg.header
         self.pub.publish(out)
 

@@ -99,6 +99,9 @@ class PlantNode(Node):
         self.timing_pub = self.create_publisher(SensorTiming, "sensor/timing", topic_qos("/sensor/timing"))
         self.laser_pub = self.create_publisher(Stroke, "laser/stroke", topic_qos("/laser/stroke"))
         self.batch_pub = self.create_publisher(SampleBatch, "plant/batch", topic_qos("/plant/batch"))
+        self._clock_msg = ClockMsg()
+        self._timing_msg = SensorTiming(period_us=self.trigger_period_us)
+        self._laser_msg = Stroke(source=Stroke.SOURCE_LASER)
         self.create_subscription(VoltageCommand, "amp/applied", self.on_applied, topic_qos("/amp/applied"))
         self.create_subscription(SampleBatch, "amp/applied_batch", self.on_applied_batch,
                                  topic_qos("/amp/applied_batch"))
@@ -235,14 +238,17 @@ class PlantNode(Node):
     def _publish_tick(self, ns: int | None = None) -> None:
         ns = self.tick_stamp_ns() if ns is None else ns
         rd = self.sim.latest()
+        # one message object per topic, refilled each tick: publish() copies it at once
         if self.clock_pub is not None:
-            c = ClockMsg()
+            c = self._clock_msg
             c.clock.sec, c.clock.nanosec = divmod(ns, 1_000_000_000)
             self.clock_pub.publish(c)
         self.sequence += 1
-        timing = SensorTiming(elapsed_us=rd.elapsed_us, period_us=self.trigger_period_us, sequence=self.sequence)
+        timing = self._timing_msg
+        timing.elapsed_us, timing.sequence = rd.elapsed_us, self.sequence
         self._stamp(timing, ns)
-        laser = Stroke(stroke_mm=rd.laser_mm, source=Stroke.SOURCE_LASER)
+        laser = self._laser_msg
+        laser.stroke_mm = rd.laser_mm
         self._stamp(laser, ns)
         self.timing_pub.publish(timing)
         self.laser_pub.publish(laser)
