@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 
 from hasel import paper
@@ -100,6 +102,7 @@ class StrainSensor:
         self._t = 0.0          # time of the next simulator sample, s
         self._next_trigger = 0.0
         self._last_us = config.rest_pulse_us
+        self._ramps: dict[tuple[int, float], np.ndarray] = {}
 
     def ideal_us(self, stroke_mm: np.ndarray) -> np.ndarray:
         """Noise-free pulse width (us) for strokes in mm: 1.1 R C0 (1 + k z)."""
@@ -111,27 +114,36 @@ class StrainSensor:
         z = np.asarray(stroke_mm, float)
         v = np.asarray(applied_kv, float)
         n = z.size
-        t = self._t + self.dt * np.arange(n)
+        if n == 0:
+            return np.empty(0)
+        t = self._t + self._ramp(n, self.dt)
         # trigger instants inside this block and the sample index where each lands
-        k0 = int(np.ceil((self._next_trigger - self._t) / self.trigger_period - 1e-9)) if n else 0
-        trig = self._next_trigger + self.trigger_period * np.arange(
-            max(0, int(np.floor((t[-1] - self._next_trigger) / self.trigger_period + 1e-9)) + 1) if n else 0)
-        del k0
+        k = max(0, math.floor((float(t[-1]) - self._next_trigger) / self.trigger_period + 1e-9) + 1)
         out = np.empty(n)
-        if trig.size:
+        if k:
+            trig = self._next_trigger + self._ramp(k, self.trigger_period)
             idx = np.minimum(np.searchsorted(t, trig - 1e-12), n - 1)
             c = self.config
             sigma = c.noise_us + c.noise_us_per_kv * np.abs(v[idx])
-            reading = self.ideal_us(z[idx]) + sigma * self.rng.standard_normal(trig.size)
+            reading = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[idx]) + sigma * self.rng.standard_normal(k)
             reading = np.round(reading / c.tick_us) * c.tick_us
-            # hold each reading from its sample until the next reading
-            held = np.full(n, -1, dtype=int)
-            held[idx] = np.arange(trig.size)
-            held = np.maximum.accumulate(held)
-            out[:] = np.where(held >= 0, reading[np.maximum(held, 0)], self._last_us)
+            # hold each reading from its sample until the next reading (a later one on the
+            # same sample wins: it gets no samples of its own)
+            first = int(idx[0])
+            out[:first] = self._last_us
+            out[first:] = np.repeat(reading, np.diff(idx, append=n))
             self._last_us = float(reading[-1])
             self._next_trigger = float(trig[-1] + self.trigger_period)
         else:
             out[:] = self._last_us
-        self._t = float(t[-1] + self.dt) if n else self._t
+        self._t = float(t[-1] + self.dt)
         return out
+
+    def _ramp(self, n: int, step: float) -> np.ndarray:
+        """``step * arange(n)``, cached (the simulator asks for the same few sizes every period)."""
+        key = (n, step)
+        r = self._ramps.get(key)
+        if r is None:
+            r = self._ramps[key] = step * np.arange(n)
+            r.flags.writeable = False
+        return r
