@@ -153,6 +153,7 @@ class _Bench:
         self.quick = bool(args.quick)
         self.t0 = time.monotonic()
         self.rows: list[Row] = []
+        self.reports: list[str] = []  # printed after the table (e.g. confusion matrices)
         self.results: dict[str, Any] = {}
         self.cache = Path(args.cache)
         self.out_dir = Path(args.json).parent
@@ -363,6 +364,9 @@ def _fig6(b: _Bench) -> None:
     n, quick = (4, True) if b.quick else (30, False)
     b.say(f"6: diagnosis blind check, {n} cases, 2 workers")
     s = run_blind(n, seed=0, workers=2, quick=quick, progress=lambda m: b.say("6: " + m.strip()))
+    from hasel.diagnose.blind import format_report
+
+    b.reports.append(format_report(s))  # the labels revealed: confusion matrix, wrong cases
     cases = s.pop("cases", [])
     s["wrong"] = [{"case": c["case"], "truth": c["truth"], "named": c["named"]} for c in cases if not c["correct"]]
     s["load_avg"] = _load()
@@ -401,6 +405,9 @@ def _fig6_foreign(b: _Bench, pct: Callable[[float | None], str]) -> None:
     n = 3 if b.quick else 10
     b.say(f"6: the diagnosis on an independent simulator's logs, {n} cases")
     s = run_othersim(n, seed=2, progress=lambda m: b.say("6: " + m.strip()), short=b.quick)
+    from hasel.othersim import format_report
+
+    b.reports.append(format_report(s))
     cases = s.pop("cases", [])
     s["wrong"] = [{"case": c["case"], "truth": c["truth"], "named": c["named"]} for c in cases if not c["correct"]]
     s.pop("no_model", None)
@@ -516,6 +523,9 @@ def run(args: argparse.Namespace) -> int:
         seconds[str(n)] = time.monotonic() - t_fig
     table = format_table(b.rows)
     print(table)
+    for rep in b.reports:
+        print()
+        print(rep)
     if b.quick:
         print("(--quick: short runs to check that every figure works; the targets apply to the full run)")
     doc = {"quick": b.quick, "figures": figures, "rt_priority": b.rt_priority, "wall_s": time.monotonic() - b.t0,
