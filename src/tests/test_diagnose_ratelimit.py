@@ -123,6 +123,11 @@ def test_fit_log_scalar_finds_the_minimum_between_grid_points():
     assert v == pytest.approx(7.3, rel=1e-3)
     assert c < 1e-6
     assert math.isnan(fit_log_scalar(lambda s: s, np.zeros(0))[0])
+    # a minimum below the grid: the grid is extended downwards by its ratio (here 2, 4 times at most)
+    v, _ = fit_log_scalar(lambda s: (math.log(s) - math.log(3.0)) ** 2, np.geomspace(10.0, 80.0, 4))
+    assert v == pytest.approx(3.0, rel=1e-3)
+    v, _ = fit_log_scalar(lambda s: (math.log(s) - math.log(0.01)) ** 2, np.geomspace(10.0, 80.0, 4))
+    assert v == pytest.approx(10.0 / 2 ** 4, rel=1e-3)  # no further than that
 
 
 def test_line_share_closed_forms():
@@ -135,3 +140,120 @@ def test_line_share_closed_forms():
     e = 0.5
     expect = math.sqrt(e * e * 4 / 45 / (1 / 3 + e * e * 4 / 45))
     assert line_share(z + e * z ** 2, z) == pytest.approx(expect, rel=1e-3)
+
+
+# -- the families that use them (hasel.diagnose.augment), on short synthetic logs -------------------
+
+def _log(rng, rate_hz=500.0):
+    """Steps and a fast sine burst (kV) at ``rate_hz``: 8 s."""
+    def hold(v, s):
+        return np.full(int(round(s * rate_hz)), float(v))
+
+    tb = np.arange(int(2.0 * rate_hz)) / rate_hz
+    u = np.concatenate([hold(0.0, 0.5), hold(2.0, 1.0), hold(5.0, 1.0), hold(3.0, 1.0), hold(1.0, 1.0),
+                        4.0 + 1.0 * np.sin(2 * np.pi * (1.0 * tb + 3.0 * tb * tb)), hold(2.0, 1.5)])
+    return np.arange(u.size) / rate_hz, u
+
+
+def _pipe(t, u, y, num, den):
+    from hasel.diagnose.augment import Pipeline
+    from hasel.diagnose.prep import prepare
+
+    return Pipeline(prepare(t, u, y, model_den=den), num, den)
+
+
+def _lsim(num, den, t, u):
+    from scipy import signal
+
+    return signal.lsim((num, den), u, t)[1]
+
+
+def test_saturation_family_finds_a_slew_limit_and_the_asymmetric_family_a_speed_limit():
+    from hasel import paper
+    from hasel.diagnose.augment import _sse, describe_params, fit_family
+
+    rng = np.random.default_rng(7)
+    num, den = paper.plant_tf()
+    t, u = _log(rng)
+    dt = t[1] - t[0]
+    # slew: the plant driven by the slew-limited command (scipy's simulation of P(s))
+    y = _lsim(num, den, t, slew_limit(u, 25.0, dt)) + 0.003 * rng.standard_normal(t.size)
+    pipe = _pipe(t, u, y, num, den)
+    f = fit_family(pipe, {}, "saturation")
+    assert f.variant == "slew"
+    assert f.theta[0] == pytest.approx(25.0, rel=0.03)
+    assert _sse(pipe, {"saturation": f}) < 0.05 * _sse(pipe, {})
+    p = describe_params(pipe, f, ("kV", "mm"))
+    assert p["slew_rate_limit"] == f.theta[0] and p["unit"] == "kV/s"
+    # speed limit of the relaxation: the stroke falls at most 6 mm/s
+    z = _lsim(num, den, t, u)
+    y2 = speed_limit(z, 6.0, dt) + 0.003 * rng.standard_normal(t.size)
+    pipe2 = _pipe(t, u, y2, num, den)
+    f2 = fit_family(pipe2, {}, "asymmetric_dynamics")
+    assert f2.variant == "rate_limit:falling"
+    assert f2.theta[0] == pytest.approx(6.0, rel=0.03)
+    assert describe_params(pipe2, f2, ("kV", "mm"))["direction"] == "falling"
+    # warm start from the fit keeps the variant and the value
+    f3 = fit_family(pipe2, {}, "asymmetric_dynamics", init=f2)
+    assert f3.variant == f2.variant and f3.theta[0] == pytest.approx(6.0, rel=0.03)
+
+
+def test_static_map_that_is_nearly_a_line_keeps_only_its_offset():
+    from hasel import paper
+    from hasel.diagnose.augment import _sse, fit_family
+
+    rng = np.random.default_rng(8)
+    num, den = paper.plant_tf()
+    t, u = _log(rng)
+    # a gain 1.25 times the nominal's: a line of the input, no curve
+    y = 1.25 * _lsim(num, den, t, u) + 0.003 * rng.standard_normal(t.size)
+    pipe = _pipe(t, u, y, num, den)
+    f = fit_family(pipe, {}, "static_nonlinearity")
+    assert len(f.theta) == 1  # only its offset: a gain is no static nonlinearity
+    load = fit_family(pipe, {}, "load_mass")  # but the load family's gain factor
+    assert load.theta[1] == pytest.approx(1.25, rel=0.02) and len(load.theta) == 2
+    assert _sse(pipe, {"load_mass": load}) < 0.02 * _sse(pipe, {})
+    # a true curve (an electrostatic-like square law of the input) keeps its curvature
+    y2 = _lsim(num, den, t, u * u / 4.0) + 0.003 * rng.standard_normal(t.size)
+    pipe2 = _pipe(t, u, y2, num, den)
+    f2 = fit_family(pipe2, {}, "static_nonlinearity")
+    assert len(f2.theta) > 2
+    assert _sse(pipe2, {"static_nonlinearity": f2}) < 0.02 * _sse(pipe2, {})
+
+
+def test_load_with_twice_the_inertia_and_a_sag():
+    from hasel import paper
+    from hasel.diagnose.augment import _sse, describe_params, fit_family
+
+    rng = np.random.default_rng(9)
+    num, den = paper.plant_tf()
+    t, u = _log(rng)
+    # P(s) (17) with its two mechanical pole pairs' inertia doubled, and 0.2 mm of sag
+    w2 = paper.P_NOTCH_RAD_S ** 2
+    quad = np.array([2.0, 230.0, w2])
+    den2 = np.polymul(np.polymul([1, 18.85], [1, 56.55]), np.polymul(quad, quad))
+    den2 = den2 * den[-1] / den2[-1]
+    y = _lsim(num, den2, t, u) - 0.2 + 0.003 * rng.standard_normal(t.size)
+    pipe = _pipe(t, u, y, num, den)
+    load = fit_family(pipe, {}, "load_mass")
+    assert load.variant == "model:sag"
+    assert load.theta[0] == pytest.approx(1.0, rel=0.05)
+    assert load.theta[2] == pytest.approx(-0.2, abs=0.01)
+    assert _sse(pipe, {"load_mass": load}) < 0.02 * _sse(pipe, {})
+    assert describe_params(pipe, load, ("kV", "mm"))["offset"] == load.theta[2]
+
+
+def test_diagnose_names_a_slew_limit_saturation_and_says_why():
+    from hasel import paper
+    from hasel.diagnose import diagnose
+
+    rng = np.random.default_rng(10)
+    num, den = paper.plant_tf()
+    t, u = _log(rng)
+    y = _lsim(num, den, t, slew_limit(u, 20.0, t[1] - t[0])) + 0.005 * rng.standard_normal(t.size)
+    v = diagnose(t, u, y, model={"num": num.tolist(), "den": den.tolist()}, units=("kV", "mm"))
+    assert v.names == ["saturation"]
+    e = v.effects[0]
+    assert e["params"]["variant"] == "slew" and e["params"]["slew_rate_limit"] == pytest.approx(20.0, rel=0.05)
+    assert "slew-rate limit" in e["evidence"]
+    assert v.heldout["nrmse_augmented"] < 2.0 * v.noise_floor_nrmse

@@ -10,12 +10,17 @@ time_delay          input                   x(t - d)
 saturation          input or output         clip at a lower or an upper limit; or
                     measured (last)         the measured range where the output
                                             piles up on its extremes (a sensor's
-                                            or a physical limit seen in the data)
+                                            or a physical limit seen in the data);
+                                            or (``slew``, input) a slew-rate limit:
+                                            the input moves at most ``S`` per second
 static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (degree 5),
                                             or (internal, a stiffness-like force)
                                             ``y + G1(s sum_j b_j w^j)``
                                             ``G1 = G / G(0)``, ``z``, ``w`` the
-                                            normalised input and output
+                                            normalised input and output; a map
+                                            that is nearly a line (a linear
+                                            correction, not a nonlinearity) keeps
+                                            only its offset
 hysteresis          input                   Prandtl-Ishlinskii:
                                             ``x + sum_j w_j (play_rj(x) - x)``,
                                             ``w_j >= 0``, five fixed thresholds, the
@@ -23,10 +28,14 @@ hysteresis          input                   Prandtl-Ishlinskii:
                                             (``c`` in [-1, 1]: the branch the log
                                             starts on; a memory of what came before)
 load_mass           model                   inertia of G's resonances (or its slowest
-                                            real pole) times ``1 + mu``, gain ``kappa``
+                                            real pole) times ``1 + mu``, gain ``kappa``;
+                                            ``model:sag``: and a static offset
+                                            ``<= 0`` (the load's weight compresses)
 asymmetric_dynamics output                  first-order lag, one time constant while
                                             the output rises, another while it falls
-                                            (log-linear in the level)
+                                            (log-linear in the level); or
+                                            (``rate_limit:falling|rising``) a speed
+                                            limit ``R`` per second in one direction
 charge_drift        output                  ``y (1 + g q) + s o q``, ``q`` a slow
                                             (``tau``) low-pass of the input's history
 sensor_nonlinearity output (last)           ``y + s sum_j c_j w^j`` (degree 5)
@@ -49,9 +58,10 @@ import numpy as np
 from scipy import optimize, signal
 
 from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
+from hasel.diagnose.ratelimit import DIRECTIONS, fit_log_scalar, rate_grid, slew_limit, speed_limit
 from hasel.effects.operators import asymmetric_lag, monotone_runs, play, scale_resonances
 
-__all__ = ["EffectFit", "Pipeline", "fit_family", "fit_drift_on_repeats", "measured_clip", "joint_refine", "family_bounds", "FAMILIES",
+__all__ = ["EffectFit", "Pipeline", "fit_family", "linear_static", "fit_drift_on_repeats", "measured_clip", "joint_refine", "family_bounds", "FAMILIES",
            "HYST_THRESHOLDS",
            "describe_params", "LINEAR", "INPUT_SIDE", "make_linear", "split_linear"]
 
@@ -65,13 +75,20 @@ STATIC_DEGREE = 5
 POLY_RIDGE = 1e-4
 #: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
 HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
+#: A static map whose curvature (its deviation from its best line) removes less than this share
+#: of what the map removes beyond its offset is a linear correction (a gain, a changed dynamic):
+#: only its offset is kept.
+NEAR_LINEAR_SHARE = 0.1
+#: Least change of the inertia (``|mu|``) for a load to carry a static offset (its weight's sag).
+LOAD_SAG_MIN_MU = 0.1
 # stages whose presence downstream keeps a least-squares basis exact
 _LINEAR_STAGES = {"time_delay", "load_mass", "_linear"}
 #: Name of the pseudo-effect holding a re-identified linear model (not an effect: never named).
 LINEAR = "_linear"
 #: Families acting before the linear model (a linear model can be re-identified through them).
 INPUT_SIDE = ("time_delay", "saturation", "static_nonlinearity", "hysteresis")
-_SLOT = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "static_nonlinearity:input": 2, "hysteresis": 3,
+_SLOT = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "saturation:slew": 1, "static_nonlinearity:input": 2,
+         "hysteresis": 3,
          "load_mass": 4, "static_nonlinearity:internal": 5, "asymmetric_dynamics": 6, "charge_drift": 7,
          "saturation:output": 8, "sensor_nonlinearity": 9, "saturation:measured": 10}
 
@@ -189,7 +206,7 @@ class Pipeline:
     def linear_of(self, effects: dict[str, "EffectFit"]) -> "LinearSim | _Scaled":
         """The linear part of the chain for ``effects`` (re-identified model and load included)."""
         f = effects.get("load_mass")
-        mu, kappa = (f.theta if f is not None else (0.0, 1.0))
+        mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
         return self.loaded(mu, kappa, effects.get(LINEAR))
 
     # -- stages ---------------------------------------------------------------------------------
@@ -231,7 +248,10 @@ class Pipeline:
             x = self._memo(("x", ri) + key, lambda x=x, f=f: _shift(rec.t_s, x, f.theta[0]))
         out["x_delay"] = x
         f = e.get("saturation")
-        if f is not None and f.variant.startswith("input"):
+        if f is not None and f.variant == "slew":
+            key += ("ss",) + f.theta
+            x = self._memo(("x", ri) + key, lambda x=x, f=f: slew_limit(x, f.theta[0], self.prep.dt_s))
+        elif f is not None and f.variant.startswith("input"):
             key += ("si", f.variant) + f.theta
             x = _clip(x, f)
         out["x_sat"] = x
@@ -251,11 +271,13 @@ class Pipeline:
             key = k2
         out["x_eff"] = x
         f = e.get("load_mass")
-        mu, kappa = (f.theta if f is not None else (0.0, 1.0))
+        mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
         lin = e.get(LINEAR)
         key += ("l", mu, kappa) + (lin.theta if lin is not None else ())
         sim = self.loaded(mu, kappa, lin)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
+        if f is not None and len(f.theta) > 2:  # the load's weight: a static offset (a sag)
+            y = y + f.theta[2]
         out["y_lin"] = y
         f = e.get("static_nonlinearity")
         if f is not None and f.variant == "internal":
@@ -263,7 +285,9 @@ class Pipeline:
             y = y + self.unit(sim).run(self.y_s * poly_map(f.theta, w))
         out["y_int"] = y
         f = e.get("asymmetric_dynamics")
-        if f is not None:
+        if f is not None and f.variant.startswith("rate_limit"):
+            y = speed_limit(y, f.theta[0], self.prep.dt_s, f.variant.split(":")[1])
+        elif f is not None:
             y = _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
         out["y_asym"] = y
         f = e.get("charge_drift")
@@ -564,6 +588,11 @@ def _fit_saturation(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit 
             c = _sse(pipe, _with(effects, fit))
             if c < best_cost:
                 best, best_cost = fit, c
+    # a slew-rate limit of the input: the gap only where the input moves faster than the limit
+    grid = rate_grid(st[0]["x_delay"], pipe.prep.dt_s)
+    rate, c = fit_log_scalar(lambda v: _sse(pipe, _with(effects, EffectFit("saturation", "slew", (v,)))), grid)
+    if c < best_cost:
+        best, best_cost = EffectFit("saturation", "slew", (rate,)), c
     return best
 
 
@@ -645,18 +674,11 @@ def _fit_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | No
     best, best_cost = None, np.inf
     for variant in ("input", "internal"):
         slot = _SLOT[f"static_nonlinearity:{variant}"]
-
-        def basis(ri, st, variant=variant):
-            sim = pipe.linear_of(effects)
-            if variant == "input":
-                z = (st["x_map"] - pipe.u_c) / pipe.u_s
-                return [sim.run(pipe.u_s * m) for m in monomials(z, STATIC_DEGREE + 1)]
-            w = (st["y_lin"] - pipe.y_c) / pipe.y_s
-            g1 = pipe.unit(sim)
-            return [g1.run(pipe.y_s * m) for m in monomials(w, STATIC_DEGREE + 1)]
-
         base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+        basis = _static_basis(pipe, base, variant)
         th = _poly_ls(pipe, base, basis)
+        if th.size > 1 and _nearly_linear(pipe, base, variant, basis, th):
+            th = _poly_ls(pipe, base, basis, degrees=(0,))
         fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
         if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
             fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
@@ -664,6 +686,49 @@ def _fit_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | No
         if c < best_cost:
             best, best_cost = fit, c
     return best
+
+
+def _static_basis(pipe: Pipeline, effects: dict[str, EffectFit], variant: str):
+    """Least-squares basis of the static map ``variant``: the responses to its monomials."""
+    def basis(ri, st):
+        sim = pipe.linear_of(effects)
+        if variant == "input":
+            z = (st["x_map"] - pipe.u_c) / pipe.u_s
+            return [sim.run(pipe.u_s * m) for m in monomials(z, STATIC_DEGREE + 1)]
+        w = (st["y_lin"] - pipe.y_c) / pipe.y_s
+        g1 = pipe.unit(sim)
+        return [g1.run(pipe.y_s * m) for m in monomials(w, STATIC_DEGREE + 1)]
+
+    return basis
+
+
+def linear_static(pipe: Pipeline, effects: dict[str, EffectFit]) -> bool:
+    """Whether the static map among ``effects`` is a linear correction rather than a nonlinearity.
+
+    A map with a slope (any fit, e.g. one refined jointly with other effects) whose curvature
+    removes less than :data:`NEAR_LINEAR_SHARE` of what the map removes beyond its offset, with
+    the others in place, acts as a gain or a changed dynamic (an internal map's line passes
+    through the dynamics once more), not as a static nonlinearity."""
+    f = effects.get("static_nonlinearity")
+    if f is None or len(f.theta) <= 1:
+        return False
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    return _nearly_linear(pipe, base, f.variant, _static_basis(pipe, base, f.variant), np.asarray(f.theta))
+
+
+def _nearly_linear(pipe: Pipeline, base: dict[str, EffectFit], variant: str, basis, th: np.ndarray) -> bool:
+    """Whether the map ``th`` is nearly a line: beyond its offset (the best constant map), its
+    curvature (the part beyond the best line) removes less than :data:`NEAR_LINEAR_SHARE` of what
+    the whole map removes; the rest is a slope, a linear correction."""
+    def sse(t: np.ndarray) -> float:
+        return _sse(pipe, _with(base, EffectFit("static_nonlinearity", variant, tuple(map(float, t)))))
+
+    s_full = sse(th)
+    beyond_offset = sse(_poly_ls(pipe, base, basis, degrees=(0,))) - s_full
+    if beyond_offset <= 0:
+        return False
+    s_line = s_full if th.size <= 2 else sse(_poly_ls(pipe, base, basis, degrees=(1,)))
+    return s_line - s_full < NEAR_LINEAR_SHARE * beyond_offset
 
 
 def _fit_sensor(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
@@ -727,8 +792,20 @@ def _fit_load(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None
         if c < best_cost:
             best, best_cost = fit, c
     assert best is not None
-    return _refine(pipe, effects, best, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
-                   x_scale=np.array([0.1, 0.1]))
+    fit = _refine(pipe, effects, best, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
+                  x_scale=np.array([0.1, 0.1]))
+    # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
+    # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
+    # kept when it lowers the training BIC (one more parameter, noise variance unknown)
+    r = pipe.residuals(_with(effects, fit), "train")
+    if r.size > 1 and r.mean() < 0 and abs(fit.theta[0]) >= LOAD_SAG_MIN_MU:
+        sag = EffectFit("load_mass", "model:sag", fit.theta + (float(r.mean()),))
+        lo, hi = family_bounds(pipe, sag)
+        sag = _refine(pipe, effects, sag, lo, hi, max_nfev=15, x_scale=np.array([0.1, 0.1, 0.1 * pipe.y_s]))
+        s0, s1 = sumsq(r), _sse(pipe, _with(effects, sag))
+        if abs(sag.theta[0]) >= LOAD_SAG_MIN_MU and s1 > 0 and r.size * math.log(s0 / s1) > math.log(r.size):
+            return sag
+    return fit
 
 
 def _fit_asym(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
@@ -743,8 +820,19 @@ def _fit_asym(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None
                 best, best_cost = fit, c
     assert best is not None
     hi = 20.0 * tdom
-    return _refine(pipe, effects, best, np.array([0.0, 0.0, -3.0]), np.array([hi, hi, 3.0]), max_nfev=15,
-                   x_scale=np.array([0.1 * tdom, 0.1 * tdom, 0.3]))
+    lag = _refine(pipe, effects, best, np.array([0.0, 0.0, -3.0]), np.array([hi, hi, 3.0]), max_nfev=15,
+                  x_scale=np.array([0.1 * tdom, 0.1 * tdom, 0.3]))
+    best, best_cost = lag, _sse(pipe, _with(effects, lag))
+    # or a speed limit in one direction: the gap only while the output moves fast that way
+    y_in = pipe.stages(effects, 0)["y_int"]
+    for direction in DIRECTIONS:
+        variant = f"rate_limit:{direction}"
+        grid = rate_grid(y_in, pipe.prep.dt_s, direction=direction)
+        rate, c = fit_log_scalar(
+            lambda v, variant=variant: _sse(pipe, _with(effects, EffectFit("asymmetric_dynamics", variant, (v,)))), grid)
+        if c < best_cost:
+            best, best_cost = EffectFit("asymmetric_dynamics", variant, (rate,)), c
+    return best
 
 
 def _fit_drift(pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
@@ -846,8 +934,12 @@ def family_bounds(pipe: Pipeline, fit: EffectFit) -> tuple[np.ndarray, np.ndarra
         if n > len(HYST_THRESHOLDS):
             lo[len(HYST_THRESHOLDS)], hi[len(HYST_THRESHOLDS)] = -1.0, 1.0
         return lo, hi
+    if fit.name == "load_mass" and n > 2:
+        return np.array([-0.8, 0.05, -np.inf]), np.array([10.0, 20.0, 0.0])
     if fit.name == "load_mass":
         return np.array([-0.8, 0.05]), np.array([10.0, 20.0])
+    if fit.variant == "slew" or fit.variant.startswith("rate_limit"):
+        return np.array([1e-12]), np.array([np.inf])
     if fit.name == "asymmetric_dynamics":
         return np.array([0.0, 0.0, -3.0]), np.array([20.0 * tdom, 20.0 * tdom, 3.0])
     if fit.name == "charge_drift":
@@ -938,6 +1030,11 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
     out: dict = {"variant": fit.variant}
     if fit.name == "time_delay":
         out["delay_s"] = th[0]
+    elif fit.name == "saturation" and fit.variant == "slew":
+        out["acts_on"] = "input"
+        out["slew_rate_limit"] = th[0]
+        out["unit"] = f"{ui}/s" if ui else "input units/s"
+        out["form"] = "x_k = x_(k-1) + clip(u_k - x_(k-1), -S dt, S dt): the input moves at most S per second"
     elif fit.name == "saturation":
         side, end = fit.variant.split(":")
         out["acts_on"] = "output" if side == "measured" else side
@@ -980,6 +1077,16 @@ def describe_params(pipe: Pipeline, fit: EffectFit, units: tuple[str, str] = (""
         out["mass_ratio"] = th[0]
         out["gain_factor"] = th[1]
         out["resonance_factor"] = 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")
+        if len(th) > 2:
+            out["offset"] = th[2]
+            out["offset_unit"] = uo
+            out["offset_note"] = "a static offset beside the changed dynamics: the load's weight compresses"
+    elif fit.name == "asymmetric_dynamics" and fit.variant.startswith("rate_limit"):
+        out["direction"] = fit.variant.split(":")[1]
+        out["speed_limit"] = th[0]
+        out["unit"] = f"{uo}/s" if uo else "output units/s"
+        out["form"] = (f"the output follows at once, but while {out['direction']} moves at most "
+                       f"speed_limit per second")
     elif fit.name == "asymmetric_dynamics":
         out["tau_rising_s"] = th[0] if th[0] >= 1e-6 else 0.0
         out["tau_falling_s"] = th[1] if th[1] >= 1e-6 else 0.0

@@ -53,7 +53,7 @@ import numpy as np
 from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
-                                    fit_family, joint_refine, make_linear, measured_clip, split_linear)
+                                    fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, prepare
 from hasel.diagnose.where import analyse
 from hasel.errors import BadInputError
@@ -324,6 +324,10 @@ def _fixed(name: str, fit: EffectFit) -> bool:
 
 
 def _saturation_text(fit: EffectFit, lv: dict) -> str:
+    if fit.variant == "slew":
+        return (f"the residual appears where the input moves fast (steps, the fast part of a sweep), whatever "
+                f"the level, and its lag grows with amplitude times frequency: the input cannot move faster "
+                f"than {fit.theta[0]:.4g} per second (a slew-rate limit)")
     side, end = fit.variant.split(":")
     if side == "measured":
         clipped = lv.get("clipped_output", {})
@@ -359,7 +363,9 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                        f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
         "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {100 * me['linear_share']:.0f} % of "
                       f"the residual, significant in {band_txt}): the resonance and gain moved "
-                      f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g})"),
+                      f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g}"
+                      + (f", and the load's weight offsets the output by {fit.theta[2]:+.3g})" if len(fit.theta) > 2
+                         else ")")),
         "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
                        f"direction adds {100 * dr['extra_share']:.0f} % to the level's share; at equal input "
@@ -369,7 +375,10 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                           f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
-                                f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}"),
+                                + (f"cannot move faster than {fit.theta[0]:.4g} per second while "
+                                   f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
+                                   if fit.variant.startswith("rate_limit") else
+                                   f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}")),
         "charge_drift": lambda: (f"the residual varies slowly in time (slow share {100 * tm['slow_share']:.0f} %, trend "
                                  f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
                                  f"{fit.theta[0]:.3g} s), not its present level" + _repeat_text(tm)),
@@ -498,7 +507,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             fit = fit_family(pipe, base, name)
             if fit is None:
                 continue
-            if name == "asymmetric_dynamics":
+            if name == "asymmetric_dynamics" and fit.variant == "output":
                 lo_, hi_ = sorted(fit.theta[:2])
                 if hi_ < opts.asym_ratio_min * (lo_ + 0.5 * prep.dt_s):
                     say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
@@ -677,6 +686,9 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                         f"(alternating{' and joint' if i < opts.pair_joint else ''} fits)")
                     results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
             results.sort(key=lambda r: (r[0], r[1]))
+        # a static map that is nearly a line (e.g. after a joint refinement) is a linear correction
+        # of the model, not a static nonlinearity: such a set is not a candidate
+        results = [r for r in results if not linear_static(pipe, r[6])]
         if not results:
             break
         m_ho, k, name, fit, m_tr, e_new, eff_new = pick(results)
@@ -718,7 +730,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         # swaps: with the newcomer in place, could an earlier choice be bettered by another family?
         for old in [n for n, v in current.items() if n != name and not _fixed(n, v)]:
             base = {k2: v for k2, v in current.items() if k2 != old}
-            alts = try_all(base, [f for f in FAMILIES if f not in current])
+            alts = [a for a in try_all(base, [f for f in FAMILIES if f not in current]) if not linear_static(pipe, a[6])]
             if alts and alts[0][0] < opts.swap_ratio * mse_ho:
                 a = alts[0]
                 say(f"  swap: {a[2]} replaces {old} (validation NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(a[0]):.4f})")
@@ -810,7 +822,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     if len(current) > 1 and opts.joint_refine:
         refined = joint_refine(pipe, current, max_nfev=opts.joint_refine_nfev)
         m_tr, m_ho, e_new = scores(refined)
-        if m_ho <= mse_ho:
+        if m_ho <= mse_ho and not linear_static(pipe, refined):
             say(f"joint refinement: validation NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(m_ho):.4f}")
             current, mse_tr, mse_ho, e_ho = refined, m_tr, m_ho, e_new
 

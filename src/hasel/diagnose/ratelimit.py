@@ -175,21 +175,37 @@ def rate_grid(x: np.ndarray, dt: float, n: int = 10, direction: str | None = Non
     return np.geomspace(lo, hi, n)
 
 
-def fit_log_scalar(cost: Callable[[float], float], grid: np.ndarray, maxiter: int = 12) -> tuple[float, float]:
-    """Minimise ``cost`` over a positive ``grid``, then between the best's neighbours in ``log``.
+def fit_log_scalar(cost: Callable[[float], float], grid: np.ndarray, maxiter: int = 12,
+                   max_extend: int = 4) -> tuple[float, float]:
+    """Minimise ``cost`` over a positive geometric ``grid``, then between the best's neighbours in ``log``.
+
+    When the best is at an end of the grid, the grid is extended beyond that end by its own
+    ratio (at most ``max_extend`` times) until the cost rises again.
 
     Returns
     -------
     (value, cost) : (float, float)
         The best value and its cost (``(nan, inf)`` for an empty grid).
     """
-    grid = np.asarray(grid, float)
-    if grid.size == 0:
+    vals = [float(v) for v in np.asarray(grid, float)]
+    if not vals:
         return float("nan"), float("inf")
-    costs = np.array([cost(float(v)) for v in grid])
+    costs = [cost(v) for v in vals]
+    if len(vals) > 1:
+        ratio = vals[1] / vals[0]
+        for _ in range(max_extend):
+            i = int(np.argmin(costs))
+            if i == 0:
+                vals.insert(0, vals[0] / ratio)
+                costs.insert(0, cost(vals[0]))
+            elif i == len(vals) - 1:
+                vals.append(vals[-1] * ratio)
+                costs.append(cost(vals[-1]))
+            else:
+                break
     i = int(np.argmin(costs))
-    best, best_c = float(grid[i]), float(costs[i])
-    lo, hi = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, grid.size - 1)])
+    best, best_c = vals[i], float(costs[i])
+    lo, hi = math.log(vals[max(i - 1, 0)]), math.log(vals[min(i + 1, len(vals) - 1)])
     if hi > lo:
         res = optimize.minimize_scalar(lambda v: cost(math.exp(v)), bounds=(lo, hi), method="bounded",
                                        options={"xatol": 1e-3 * (hi - lo), "maxiter": maxiter})
