@@ -68,7 +68,9 @@ class DiagnoseOptions:
     Attributes
     ----------
     max_effects : int
-        Most effects named.
+        Most effects forward selection names. The checks that follow it may add
+        ``charge_drift`` (change between repeats) and ``saturation`` (a measured clip)
+        beyond this, each only when it helps significantly.
     min_first_gain, min_next_gain : float
         Share of the validation residual energy the first / each further effect must remove.
     min_gap_share : float
