@@ -325,11 +325,16 @@ def _fixed(name: str, fit: EffectFit) -> bool:
     return name == LINEAR or fit.variant.startswith("measured")
 
 
-def _saturation_text(fit: EffectFit, lv: dict) -> str:
+def _rate_unit(unit: str) -> str:
+    """A rate's unit from a signal's unit name ("kV" -> "kV/s"); "per second" without one."""
+    return f" {unit}/s" if unit else " per second"
+
+
+def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "") -> str:
     if fit.variant == "slew":
         return (f"the residual appears where the input moves fast (steps, the fast part of a sweep), whatever "
                 f"the level, and its lag grows with amplitude times frequency: the input cannot move faster "
-                f"than {fit.theta[0]:.4g} per second (a slew-rate limit)")
+                f"than {fit.theta[0]:.4g}{_rate_unit(input_unit)} (a slew-rate limit)")
     side, end = fit.variant.split(":")
     if side == "measured":
         clipped = lv.get("clipped_output", {})
@@ -346,7 +351,7 @@ def _tau(x: float) -> str:
 
 
 def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tuple[str, float] | None,
-              pipe: Pipeline) -> str:
+              pipe: Pipeline, units: tuple[str, str] = ("", "")) -> str:
     lv, dr, tm, fr = where["level"], where["direction"], where["time"], where["frequency"]
     me = fr["model_error"]
     bands = me.get("significant_bands_hz") or []
@@ -359,7 +364,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
                                 f"explain {100 * lv['share_instant_output']:.0f} %) applied after the dynamics: "
                                 f"an output-side map fits better than an input-side one"),
-        "saturation": lambda: _saturation_text(fit, lv),
+        "saturation": lambda: _saturation_text(fit, lv, units[0]),
         "time_delay": lambda: (f"the residual tracks the nominal output's rate (correlation "
                        f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
                        f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
@@ -377,7 +382,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                           f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
-                                + (f"cannot move faster than {fit.theta[0]:.4g} per second while "
+                                + (f"cannot move faster than {fit.theta[0]:.4g}{_rate_unit(units[1])} while "
                                    f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
                                    if fit.variant.startswith("rate_limit") else
                                    f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}")),
@@ -839,7 +844,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         m_after = final_nrmse({k2: current[k2] for k2 in ranked[:i + 1] + ([LINEAR] if LINEAR in current else [])})
         gain, runner = evidence_of.get(name, (0.0, None))
         named.append({"name": name, "params": describe_params(pipe, fit, units, effects=current),
-                      "evidence": _evidence(name, fit, where, gain, runner, pipe),
+                      "evidence": _evidence(name, fit, where, gain, runner, pipe, units),
                       "nrmse_after": m_after, "gap_removed": gain,
                       "n_params": fit.n_params, "theta": list(fit.theta)})
 
