@@ -46,6 +46,15 @@ def _fig(path: Path):
     return plt
 
 
+def _save(fig, path: Path) -> None:
+    """Lay out, write (PNG, 110 dpi) and close one figure."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    import matplotlib.pyplot as plt  # already loaded by _fig
+
+    plt.close(fig)
+
+
 def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = ("", ""),
                  title: str = "Sim-to-real gap diagnosis") -> Path:
     """Write ``report.md`` and PNG figures for verdict ``v`` into ``directory``.
@@ -102,9 +111,7 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     ax[1].set_xlabel("frequency (Hz)")
     ax[1].set_ylabel(f"gain{' (' + uo + '/' + ui + ')' if ui and uo else ''}")
     ax[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(d / "residual_spectrum.png", dpi=110)
-    plt.close(fig)
+    _save(fig, d / "residual_spectrum.png")
 
     # 2. level and direction
     r, up = a["r"], a["up"]
@@ -116,9 +123,7 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
         ax[k].set_xlabel(name)
         ax[k].set_ylabel(f"residual{lab_o}")
         ax[k].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(d / "residual_level.png", dpi=110)
-    plt.close(fig)
+    _save(fig, d / "residual_level.png")
 
     # 3. time
     t = a["t"]
@@ -130,9 +135,7 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"residual{lab_o}")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(d / "residual_time.png", dpi=110)
-    plt.close(fig)
+    _save(fig, d / "residual_time.png")
 
     # 4. overlay
     ex = v.export
@@ -150,9 +153,7 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"output{lab_o}")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(d / "overlay.png", dpi=110)
-    plt.close(fig)
+    _save(fig, d / "overlay.png")
 
     # 5. NRMSE steps
     names = ["nominal"] + [e["name"] for e in v.effects]
@@ -163,9 +164,7 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     ax.set_xticks(range(len(vals)), ["nominal"] + [f"+ {x}" for x in names[1:]], rotation=20, fontsize=8)
     ax.set_ylabel("held-out NRMSE")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(d / "nrmse.png", dpi=110)
-    plt.close(fig)
+    _save(fig, d / "nrmse.png")
 
     lv, dr, tm = where["level"], where["direction"], where["time"]
     md = [f"# {title}", "",
