@@ -113,6 +113,7 @@ class NominalActuator:
         # outputs at the end of each held sample: a block's last sample is the next tick
         self._amp = SosFilter(zoh_sos(amp_num, amp_den, dt, output="end"))
         self._chain = SosFilter(zoh_sos(chain_num, chain_den, dt, output="end"))
+        self._held: dict[int, np.ndarray] = {}
 
     def reset(self, command_kv: float = 0.0) -> None:
         """At rest with ``command_kv`` (kV) applied forever."""
@@ -123,6 +124,35 @@ class NominalActuator:
         """Advance by the samples of ``command_kv`` (kV, at ``rate_hz``)."""
         u = np.asarray(command_kv, dtype=float)
         if u.size > 1 and u[0] == u[-1] and np.all(u == u[0]):  # a held command: the fast exact path
-            return ActuatorSamples(applied_kv=self._amp.run_constant(float(u[0]), u.size),
-                                   stroke_mm=self._chain.run_constant(float(u[0]), u.size))
+            return self.run_held(float(u[0]), u.size)
         return ActuatorSamples(applied_kv=self._amp.run(u), stroke_mm=self._chain.run(u))
+
+    def run_held(self, command_kv: float, n: int) -> ActuatorSamples:
+        """Advance by ``n`` samples of one command held constant (kV): a loop period.
+
+        Both filters' outputs and next states are one linear map of their states and
+        the command, applied as a single matrix product (the same numbers as
+        :meth:`run` to rounding; the simulator calls this once per 200 Hz tick).
+        """
+        W = self._held.get(n)
+        if W is None:
+            W = self._held[n] = self._held_map(n)
+        amp, chain = self._amp, self._chain
+        ka = amp.zi.size
+        x = np.concatenate((amp.zi.ravel(), chain.zi.ravel(), (command_kv,)))
+        r = W @ x
+        amp.zi = r[2 * n:2 * n + ka].reshape(amp.zi.shape)
+        chain.zi = r[2 * n + ka:].reshape(chain.zi.shape)
+        return ActuatorSamples(applied_kv=r[:n], stroke_mm=r[n:2 * n])
+
+    def _held_map(self, n: int) -> np.ndarray:
+        """[applied; stroke; amp state'; chain state'] = W @ [amp state; chain state; u]."""
+        Ya, ya, Za, za = self._amp._block_maps(n)
+        Yc, yc, Zc, zc = self._chain._block_maps(n)
+        ka, kc = Za.shape[0], Zc.shape[0]
+        W = np.zeros((2 * n + ka + kc, ka + kc + 1))
+        W[:n, :ka], W[:n, -1] = Ya, ya
+        W[n:2 * n, ka:ka + kc], W[n:2 * n, -1] = Yc, yc
+        W[2 * n:2 * n + ka, :ka], W[2 * n:2 * n + ka, -1] = Za, za
+        W[2 * n + ka:, ka:ka + kc], W[2 * n + ka:, -1] = Zc, zc
+        return W

@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import math
+from fractions import Fraction
 
 import numpy as np
 
@@ -49,9 +50,15 @@ class LaserSensor:
 
     def measure(self, stroke_mm: np.ndarray) -> np.ndarray:
         """Quantised, noisy readings (mm) of the true strokes ``stroke_mm`` (mm)."""
-        z = np.asarray(stroke_mm, float) + self.config.noise_mm * self.rng.standard_normal(np.size(stroke_mm))
-        code = np.clip(np.round(z / self.lsb_mm), 0, self.max_code)
-        return code * self.lsb_mm
+        w = self.rng.standard_normal(np.size(stroke_mm))
+        w *= self.config.noise_mm
+        w += stroke_mm
+        w /= self.lsb_mm
+        np.rint(w, out=w)  # the ADC's code (rint rounds half to even, as np.round does)
+        np.maximum(w, 0.0, out=w)  # clip to the ADC's codes (two ufuncs: cheaper than np.clip here)
+        np.minimum(w, self.max_code, out=w)
+        w *= self.lsb_mm
+        return w
 
 
 @dataclass(frozen=True)
@@ -103,11 +110,45 @@ class StrainSensor:
         self._next_trigger = 0.0
         self._last_us = config.rest_pulse_us
         self._ramps: dict[tuple[int, float], np.ndarray] = {}
+        self._pattern = self._landing_pattern(rate_hz, config.trigger_hz)
+        self._i = 0  # index of the next simulator sample (exact, for the periodic pattern)
+        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, int]] = {}
 
     def ideal_us(self, stroke_mm: np.ndarray) -> np.ndarray:
         """Noise-free pulse width (us) for strokes in mm: 1.1 R C0 (1 + k z)."""
         c = self.config
         return c.rest_pulse_us * (1.0 + c.stretch_per_mm * np.asarray(stroke_mm, float))
+
+    @staticmethod
+    def _landing_pattern(rate_hz: float, trigger_hz: float) -> tuple[int, np.ndarray] | None:
+        """Where triggers land when the rates are in a small whole ratio (10 kHz / 4.5 kHz = 20/9).
+
+        Trigger j is read at the first sample at or after j / trigger_hz, sample
+        ceil(j * rate / trigger). With rate / trigger = p / q that index is
+        (j // q) * p + land[j % q]: the pattern repeats every q triggers and p samples,
+        exactly, for as long as the simulation runs. Returns (p, land) or None
+        (no small ratio: the general path computes trigger times instead).
+        """
+        ratio = Fraction(rate_hz / trigger_hz).limit_denominator(1000)
+        if ratio <= 0 or abs(float(ratio) - rate_hz / trigger_hz) > 1e-12 * (rate_hz / trigger_hz):
+            return None
+        p, q = ratio.numerator, ratio.denominator
+        land = np.array([math.ceil(j * p / q - 1e-9) for j in range(q)])
+        return p, land
+
+    def _block(self, i0: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """For samples [i0, i0 + n): the sample (from i0) of each trigger, samples each reading holds, first."""
+        p, land = self._pattern
+        key = (i0 % p, n)
+        hit = self._blocks.get(key)
+        if hit is None:
+            r = key[0]
+            cycles = -(-(r + n) // p) + 1
+            at = (np.arange(cycles)[:, None] * p + land[None, :]).ravel()  # from the pattern's start before i0
+            idx = at[(at >= r) & (at < r + n)] - r
+            counts = np.diff(idx, append=n)
+            hit = self._blocks[key] = (idx, counts, int(idx[0]) if idx.size else n)
+        return hit
 
     def measure(self, stroke_mm: np.ndarray, applied_kv: np.ndarray) -> np.ndarray:
         """Latest elapsed time (us) at each simulator sample of ``stroke_mm``/``applied_kv``."""
@@ -116,6 +157,8 @@ class StrainSensor:
         n = z.size
         if n == 0:
             return np.empty(0)
+        if self._pattern is not None:
+            return self._measure_pattern(z, v, n)
         t = self._t + self._ramp(n, self.dt)
         # trigger instants inside this block and the sample index where each lands
         k = max(0, math.floor((float(t[-1]) - self._next_trigger) / self.trigger_period + 1e-9) + 1)
@@ -137,6 +180,29 @@ class StrainSensor:
         else:
             out[:] = self._last_us
         self._t = float(t[-1] + self.dt)
+        return out
+
+    def _measure_pattern(self, z: np.ndarray, v: np.ndarray, n: int) -> np.ndarray:
+        """:meth:`measure` when the trigger instants follow a periodic pattern of samples."""
+        idx, counts, first = self._block(self._i, n)
+        self._i += n
+        out = np.empty(n)
+        k = idx.size
+        if k:
+            c = self.config
+            sigma = np.abs(v[idx])
+            sigma *= c.noise_us_per_kv
+            sigma += c.noise_us
+            reading = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[idx]) + sigma * self.rng.standard_normal(k)
+            reading /= c.tick_us
+            np.rint(reading, out=reading)  # whole ticks of the MCU's timer
+            reading *= c.tick_us
+            # a later reading on the same sample wins: the earlier one has a count of 0
+            out[:first] = self._last_us
+            out[first:] = np.repeat(reading, counts)
+            self._last_us = float(reading[-1])
+        else:
+            out[:] = self._last_us
         return out
 
     def _ramp(self, n: int, step: float) -> np.ndarray:

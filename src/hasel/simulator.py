@@ -107,15 +107,19 @@ class PlantSimulator:
         n = self.samples_per_period
         cmd = np.asarray(command_kv, dtype=float)
         if cmd.ndim == 0:
-            cmd = np.full(n, float(cmd))
+            last = float(cmd)
+            held = getattr(self.actuator, "run_held", None)  # one held value: the actuator's fast path
+            out = held(last, n) if held is not None else self.actuator.run(np.full(n, last))
         elif cmd.shape != (n,):
             raise BadInputError(f"a period needs {n} command samples, got {cmd.shape}")
-        out = self.actuator.run(cmd)
+        else:
+            last = float(cmd[-1])
+            out = self.actuator.run(cmd)
         z = out.stroke_mm
         laser = self.laser.measure(z)
         z_sensor = z if self.strain_curve is None else self.strain_curve(z)
         elapsed = self.strain.measure(z_sensor, out.applied_kv)
-        block = PlantBlock(self.t_s, self.dt_s, float(cmd[-1]), out.applied_kv, z, laser, elapsed)
+        block = PlantBlock(self.t_s, self.dt_s, last, out.applied_kv, z, laser, elapsed)
         self.tick += 1
         self._latest = Readings(self.t_s, float(laser[-1]), float(elapsed[-1]),
                                 float(out.applied_kv[-1]), float(z[-1]))

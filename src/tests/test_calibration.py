@@ -44,3 +44,15 @@ def test_bad_inputs(tmp_path):
         Calibration.from_yaml(bad)
     with pytest.raises(DataFileError, match="cannot read"):
         Calibration.from_yaml(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize("coeffs", [(0.4, -40.0), (1e-3, 0.3, -35.0), (-2e-6, 1e-3, 0.3, -35.0)])
+def test_one_reading_gives_the_same_number_as_polyval(coeffs):
+    # the driver converts one float per tick without numpy: it must agree to the last bit
+    cal = Calibration(coeffs, "test")
+    for us in (0.0, 99.5, 101.3, 123.456789, float("nan")):
+        want = float(np.polyval(coeffs, us))
+        got = cal(us)
+        assert isinstance(got, float)
+        assert got == want or (np.isnan(got) and np.isnan(want))
+    np.testing.assert_array_equal(cal(np.array([99.5, 101.3])), np.polyval(coeffs, [99.5, 101.3]))

@@ -15,14 +15,22 @@ def _sensor(seed: int = 0, **kw) -> StrainSensor:
     return StrainSensor(StrainConfig(**kw), RATE_HZ, np.random.default_rng(seed))
 
 
-def test_readings_are_taken_at_4_5_khz_and_held_until_the_next():
+@pytest.mark.parametrize("trigger_hz", [4500.0, 4321.987])
+def test_readings_are_taken_at_4_5_khz_and_held_until_the_next(trigger_hz):
     # a ramp of stroke, no noise: each reading is the ideal pulse width of the stroke at
-    # the first simulator sample at or after its trigger instant j / 4500 s
+    # the first simulator sample at or after its trigger instant j / 4500 s. 10 kHz and
+    # 4.5 kHz are in the ratio 20/9 (a repeating pattern of samples); 4321.987 Hz is not
+    # (trigger times are computed instead): both must follow the definition.
     n = 10_000
     z = np.linspace(0.0, 9.0, n)
-    c = StrainConfig(noise_us=0.0, noise_us_per_kv=0.0, tick_us=1e-9)  # fine timer: every reading differs
-    out = StrainSensor(c, RATE_HZ, np.random.default_rng(0)).measure(z, np.zeros(n))
-    trig_idx = np.array([math.ceil(j * RATE_HZ / c.trigger_hz - 1e-9) for j in range(4500)])
+    c = StrainConfig(noise_us=0.0, noise_us_per_kv=0.0, tick_us=1e-9,  # fine timer: every reading differs
+                     trigger_hz=trigger_hz)
+    sensor = StrainSensor(c, RATE_HZ, np.random.default_rng(0))
+    assert (sensor._pattern is not None) == (trigger_hz == 4500.0)
+    out = np.concatenate([sensor.measure(z[a:a + 50], np.zeros(50)) for a in range(0, n, 50)])  # 200 Hz blocks
+    last = int(n * c.trigger_hz / RATE_HZ) + 2
+    trig_idx = np.array([math.ceil(j * RATE_HZ / c.trigger_hz - 1e-9) for j in range(last)])
+    trig_idx = trig_idx[trig_idx < n]
     changes = np.flatnonzero(np.diff(out)) + 1
     assert np.array_equal(changes, trig_idx[1:])  # a new value exactly where a trigger lands
     ideal = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[trig_idx])
