@@ -22,7 +22,7 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
-from hasel_driver.rosutil import declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
+from hasel_driver.rosutil import Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 __all__ = ["HvAmplifierNode", "main"]
@@ -54,7 +54,8 @@ class HvAmplifierNode(Node):
         self.create_subscription(SampleBatch, "amp/command_batch", self.on_batch, topic_qos("/amp/command_batch"))
         self.create_subscription(VoltageCommand, "amp/precondition", self.on_precondition,
                                  topic_qos("/amp/precondition"))
-        self.create_timer(self.period_s, self.on_watchdog)
+        # runs only when commands are late (not every period): see Deadline
+        self.deadline = Deadline(self, self.watchdog.timeout_s, self.period_s, self.on_watchdog)
 
     def _on_params(self, new: dict) -> None:
         """Reject unsafe limits with the reason (HvLimits raises); apply safe ones."""
@@ -62,6 +63,7 @@ class HvAmplifierNode(Node):
         periods = new.get("watchdog_periods", self.watchdog.periods)
         self.limits = limits
         self.watchdog.periods = float(periods)
+        self.deadline.timeout_s = self.watchdog.timeout_s
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -78,17 +80,20 @@ class HvAmplifierNode(Node):
                                              from_stamp(stamp), requested_kv=requested, applied_kv=applied))
         self.last_reason = reason
 
+    def _feed(self) -> None:
+        self.watchdog.feed(self._now())
+        self.deadline.feed()
+        self.tripped = False
+
     def on_command(self, msg: VoltageCommand) -> None:
         """A 200 Hz request from the controller: limit it and pass it on with its stamp."""
-        self.watchdog.feed(self._now())
-        self.tripped = False
+        self._feed()
         out = self.limits.apply(msg.requested_kv)
         self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
 
     def on_batch(self, msg: SampleBatch) -> None:
         """An open-loop 10 kHz request: every sample limited (NaN/inf -> 0 kV)."""
-        self.watchdog.feed(self._now())
-        self.tripped = False
+        self._feed()
         req = np.asarray(msg.voltage_kv, dtype=float)
         applied = np.clip(np.nan_to_num(req, nan=0.0, posinf=0.0, neginf=0.0),
                           self.limits.v_min_kv, self.limits.v_max_kv)
@@ -103,13 +108,12 @@ class HvAmplifierNode(Node):
 
     def on_precondition(self, msg: VoltageCommand) -> None:
         """The deliberate charge reversal (bounded to [-2, 0] kV)."""
-        self.watchdog.feed(self._now())
-        self.tripped = False
+        self._feed()
         out = HvLimits.precondition(msg.requested_kv)
         self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
 
     def on_watchdog(self) -> None:
-        """Every period: once commands have stopped for too long, command 0 kV each period."""
+        """Once commands have stopped for too long: command 0 kV, then again every period."""
         now = self._now()
         if self.watchdog.last_s is None or not self.watchdog.expired(now):
             return
