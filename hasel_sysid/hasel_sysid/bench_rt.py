@@ -28,9 +28,10 @@ does not scan the long-lived nodes inside a period.
 Missed periods are the plant's own count (no output by the next tick) plus ticks the
 timer skipped because the process woke too late (``expected - ticks``).
 
-Workers run as ``python -m hasel_sysid.bench_rt WORKER_JSON`` and print one JSON line
-(``ready``) when their nodes are matched, wait for ``go EPOCH`` on stdin, then print
-the result as one JSON line.
+Workers run as ``python -m hasel_sysid.bench_rt WORKER_JSON`` and print one line
+(``ready``) when their nodes are matched, wait for ``go EPOCH`` on stdin, print the
+result as one JSON line, and tear their nodes down only on ``end`` (sent once every
+worker has measured: one worker's teardown must not load the others' window).
 """
 from __future__ import annotations
 
@@ -191,8 +192,14 @@ def _spin_for(ex, seconds: float) -> None:
 
 
 def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
-               ready: Callable[[], None] | None = None) -> dict[str, Any]:
+               ready: Callable[[], None] | None = None,
+               measured: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
     """Build the worker's loops, wait for ``go()`` (the phase epoch), warm up, measure.
+
+    ``measured(result)`` is called after the measurement and before the nodes are torn
+    down, so that a worker can hold its teardown until every other worker has
+    finished measuring (destroying a hundred nodes loads a core and floods DDS
+    discovery: it would be counted against the workers still measuring).
 
     Returns
     -------
@@ -231,20 +238,32 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
         if spec.freeze_gc:
             gc.collect()
             gc.freeze()
+            # the collection stalls every loop for tens of ms: let them catch up before
+            # counting, or the stall of the set-up is counted as missed periods
+            _spin_for(ex, 0.25)
         for p in plants:
             p.latencies_ns.clear()
             p.missed_periods = 0
+            p.missed_at_ns.clear()
             p.ticks = 0
+        pauses: list[tuple[float, int, float]] = []  # (start s, generation, ms): to explain missed periods
+        gc_watch = _gc_watch(pauses)
+        gc.callbacks.append(gc_watch)
         c0, w0 = time.process_time(), time.monotonic()
         _spin_for(ex, spec.duration_s)
         cpu, wall = time.process_time() - c0, time.monotonic() - w0
+        gc.callbacks.remove(gc_watch)
         loops = []
         for p in plants:
             expected = int(round(wall / PERIOD_S))
             loops.append({"ns": p.get_namespace(), "latencies_us": [x / 1e3 for x in p.latencies_ns],
-                          "missed": int(p.missed_periods), "ticks": int(p.ticks), "expected": expected})
-        return {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
-                "scheduler": sched}
+                          "missed": int(p.missed_periods), "ticks": int(p.ticks), "expected": expected,
+                          "missed_at_s": [x * 1e-9 for x in p.missed_at_ns]})
+        result = {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
+                  "scheduler": sched, "gc_pauses": [p for p in pauses if p[2] >= 1.0], "t_start": w0}
+        if measured is not None:
+            measured(result)
+        return result
     finally:
         if spec.freeze_gc:
             gc.unfreeze()
@@ -253,6 +272,18 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
         for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+def _gc_watch(out: list) -> Callable[[str, dict], None]:
+    """A ``gc.callbacks`` hook appending (start time s, generation, duration ms) of each collection."""
+    start = [0.0]
+
+    def hook(phase: str, info: dict) -> None:
+        if phase == "start":
+            start[0] = time.monotonic()
+        else:
+            out.append((start[0], int(info["generation"]), 1e3 * (time.monotonic() - start[0])))
+    return hook
 
 
 def _done_future():
@@ -293,13 +324,17 @@ def _worker_main(argv: Sequence[str]) -> int:
     box: list[float] = []
     got = threading.Event()
 
+    end = threading.Event()
+
     def reader() -> None:
         for line in sys.stdin:
             if line.startswith("go"):
                 box.append(float(line.split()[1]))
                 got.set()
-                return
+            elif line.startswith("end"):
+                break
         got.set()  # stdin closed: the parent is gone
+        end.set()
 
     def go() -> float:
         threading.Thread(target=reader, daemon=True).start()
@@ -311,9 +346,12 @@ def _worker_main(argv: Sequence[str]) -> int:
         sys.stdout.write("ready\n")
         sys.stdout.flush()
 
-    res = run_worker(spec, go, ready)
-    sys.stdout.write(json.dumps(res) + "\n")
-    sys.stdout.flush()
+    def measured(res: dict[str, Any]) -> None:
+        sys.stdout.write(json.dumps(res) + "\n")
+        sys.stdout.flush()
+        end.wait(120.0)  # tear down only when every worker has measured
+
+    run_worker(spec, go, ready, measured)
     return 0
 
 
@@ -353,6 +391,9 @@ def run_layout(specs: Sequence[WorkerSpec], in_process: bool = False,
             if not line:
                 raise HaselError(f"real-time worker ended without a result (exit {p.wait(5)})")
             out.append(json.loads(line))
+        for p in procs:  # all have measured: now they may tear down
+            p.stdin.write("end\n")
+            p.stdin.flush()
         for p in procs:
             p.wait(timeout=max(1.0, deadline - time.monotonic()))
         return out
