@@ -26,7 +26,9 @@ Python's garbage collector is frozen after set-up (``gc.freeze``) so a collectio
 does not scan the long-lived nodes inside a period.
 
 Missed periods are the plant's own count (no output by the next tick) plus ticks the
-timer skipped because the process woke too late (``expected - ticks``).
+timer skipped because the process woke more than a period late (the plant counts
+them from the gaps between its wake-ups; ``expected - ticks`` would also count the
+phase of a loop's first tick against the window as a miss).
 
 Workers run as ``python -m hasel_sysid.bench_rt WORKER_JSON`` and print one line
 (``ready``) when their nodes are matched, wait for ``go EPOCH`` on stdin, print the
@@ -181,6 +183,7 @@ def _stagger(plants: list, spec: WorkerSpec, epoch: float) -> None:
 
 
 def _spin_for(ex, seconds: float) -> None:
+    """Spin ``ex`` for ``seconds`` of wall time, in one call (each new call can stall the loops)."""
     from rclpy.task import Future
 
     end = time.monotonic() + seconds
@@ -188,7 +191,7 @@ def _spin_for(ex, seconds: float) -> None:
         left = end - time.monotonic()
         if left <= 0:
             return
-        ex.spin_until_future_complete(Future(), timeout_sec=min(left, 1.0))
+        ex.spin_until_future_complete(Future(), timeout_sec=left)
 
 
 def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
@@ -204,7 +207,8 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
     Returns
     -------
     dict
-        ``loops`` (per loop: ``latencies_us`` list, ``missed``, ``ticks``, ``expected``),
+        ``loops`` (per loop: ``latencies_us`` list, ``missed``, ``ticks``, ``expected``,
+        ``skipped``, ``missed_at_s``),
         ``cpu_s`` and ``wall_s`` of the measured window, ``setup_s``.
     """
     import rclpy
@@ -238,12 +242,14 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
         if spec.freeze_gc:
             gc.collect()
             gc.freeze()
-            # the collection stalls every loop for tens of ms: let them catch up before
+            # the collection stalls every loop for tens of ms: let them catch up (1 s: 0.25 s
+            # still left periods skipped in the first 0.15 s of the window) before
             # counting, or the stall of the set-up is counted as missed periods
-            _spin_for(ex, 0.25)
+            _spin_for(ex, 1.0)
         for p in plants:
             p.latencies_ns.clear()
             p.missed_periods = 0
+            p.skipped_periods = 0
             p.missed_at_ns.clear()
             p.ticks = 0
         pauses: list[tuple[float, int, float]] = []  # (start s, generation, ms): to explain missed periods
@@ -258,6 +264,7 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
             expected = int(round(wall / PERIOD_S))
             loops.append({"ns": p.get_namespace(), "latencies_us": [x / 1e3 for x in p.latencies_ns],
                           "missed": int(p.missed_periods), "ticks": int(p.ticks), "expected": expected,
+                          "skipped": int(p.skipped_periods),
                           "missed_at_s": [x * 1e-9 for x in p.missed_at_ns]})
         result = {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
                   "scheduler": sched, "gc_pauses": [p for p in pauses if p[2] >= 1.0], "t_start": w0}
@@ -300,7 +307,7 @@ def latency_summary(loops: Sequence[dict]) -> dict[str, Any]:
     """
     lat = np.concatenate([np.asarray(l["latencies_us"], float) for l in loops]) if loops else np.empty(0)
     expected = sum(l["expected"] for l in loops)
-    skipped = sum(max(0, l["expected"] - l["ticks"]) for l in loops)
+    skipped = sum(l["skipped"] for l in loops)
     late = sum(l["missed"] for l in loops)
     per_p99 = [float(np.percentile(l["latencies_us"], 99)) for l in loops if len(l["latencies_us"])]
     out = {"loops": len(loops), "samples": int(lat.size), "expected_ticks": int(expected),

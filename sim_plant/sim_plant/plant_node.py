@@ -91,6 +91,8 @@ class PlantNode(Node):
         self.latencies_ns: list[int] = []  # wall mode: sensor stamp -> amplifier output, ns
         self.missed_periods = 0
         self.missed_at_ns: list[int] = []  # wall mode: stamps of the ticks left unanswered, ns
+        self.skipped_periods = 0  # wall mode: periods the timer skipped (woken more than a period late)
+        self._last_wake_ns: int | None = None
         self.ticks = 0
         self._wall_tick_ns: int | None = None
         self._answered = True
@@ -219,6 +221,10 @@ class PlantNode(Node):
         if self._wall_tick_ns is not None and not self._answered:
             self.missed_periods += 1
             self.missed_at_ns.append(self._wall_tick_ns)
+        wake = time.monotonic_ns()
+        if self._last_wake_ns is not None:  # the timer skips the periods it woke too late for
+            self.skipped_periods += max(0, round((wake - self._last_wake_ns) / self.period_ns) - 1)
+        self._last_wake_ns = wake
         block = self.sim.step(self.command)
         if self.publish_batch and self.batch_pub.get_subscription_count():
             self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
