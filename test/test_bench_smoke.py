@@ -52,6 +52,15 @@ def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
     assert fl["tick_floor_us"] == pytest.approx(fl["round_us"] + fl["hop_us"] + fl["sim_step_us"])
     assert fl["speed_ceiling"] == pytest.approx(5000.0 / fl["tick_floor_us"])
     assert any(r["figure"].startswith("1 ceiling") for r in doc["table"])
+    # a hop split into a publish and a delivery (one more subscriber per hop, measured)
+    assert fl["delivery_us"] > 0 and fl["publish_us"] >= 0
+    ev = g["events"]
+    assert ev["deliveries_per_tick"] >= ev["publishes_per_tick"] >= 8  # every loop message, each recorded
+    from hasel_sysid.bench_graph import pattern_ceiling
+
+    assert ev["pattern_ceiling"] == pytest.approx(pattern_ceiling(fl, ev["publishes_per_tick"],
+                                                                  ev["deliveries_per_tick"], ev["timers_per_tick"]))
+    assert ev["speed"] < ev["pattern_ceiling"] * 1.2  # nothing beats its own empty-callback ceiling by much
     assert not (tmp_path / "cache").exists()  # the campaign cache lives for the run only
     f = res["8_fuzz"]
     assert f["cases"] > 0 and f["cases"] == f["ok"] + f["rejected"] + f["crashed"] + len(f["hangs"])

@@ -14,7 +14,14 @@ Figures (each measured against its baseline in the same run where one exists):
    (:func:`~hasel_sysid.bench_graph.ring_floor`): five nodes that do nothing but
    pass one message around, one more hop for ``/clock``, and one step of the plant
    simulation; ``period / that`` is the most a lockstep graph of five nodes can
-   reach, with and without the plant's own cost.
+   reach, with and without the plant's own cost. And the ceiling of this graph's
+   own message pattern: its publishes and deliveries per tick priced at the empty
+   ring's measured cost of a publish and of a delivery, plus the plant step
+   (:func:`~hasel_sysid.bench_graph.pattern_ceiling`): the speed of the same graph
+   if every callback did nothing; a target above it cannot be met with this stack.
+   And the other process layout: the recorder in a process of its own, on the other
+   core (:func:`~hasel_sysid.bench_graph.graph_speed_split`): its speed, and the
+   messages it lost (the loop does not wait for a recorder in another process).
 2. The offline core closed loop (:func:`hasel.loop.run_closed_loop`): simulated
    seconds per wall second, against ``scipy.signal.lsim`` of the same loop's plant on
    the same input.
@@ -55,6 +62,9 @@ Executors, and why:
   hops, so the cost per hop sets the speed; it is several times lower there than in
   the ``SingleThreadedExecutor`` (both measured here), and ``/clock`` driven
   timers fire at the right simulated stamps with it (checked on the recording).
+  The recorder stays in the loop's process: in a process of its own it gains
+  nothing (a message to another process costs its sender more than an in-process
+  delivery) and loses what it cannot keep up with (both measured in figure 1).
 - Real time (figures 3, 4, 7): ``EventsExecutor`` in each worker process, whole
   loops per process (no loop split across processes: an inter-process hop costs
   more latency than the in-process one, measured as figure 3's baseline); plants'
@@ -190,6 +200,15 @@ def _fig1(b: _Bench) -> None:
     need = 1e6 * _period_s() / 40.0 / ev["us_per_callback"]
     b.row("1 executor callbacks per simulated tick", f"{ev['callbacks_per_tick']:.0f} x {ev['us_per_callback']:.1f} us",
           "-", None, f"40x needs <= {need:.0f} at this cost", None)
+    from hasel_sysid.bench_graph import graph_speed_split
+
+    b.say(f"1: same graph, recorder in a process of its own, {base_dur * 5:g} s simulated")
+    with tempfile.TemporaryDirectory(prefix="hasel-bench-") as tmp:
+        sp = graph_speed_split(base_dur * 5, b.domain, tmp)
+    b.results["1_graph_sim_time"]["split"] = sp
+    b.row("1 same graph, recorder in a 2nd process", f"{sp['speed']:.1f}x, lost {sp['lost']} of "
+          f"{sp['published']} messages", f"loop process {sp['cpu_us_per_tick']:.0f} us CPU/tick",
+          sp["speed"] / ev["speed"], "nothing lost", sp["lost"] == 0)
     ok = ev["sim_time_ok"] and st["sim_time_ok"]
     b.row("1 simulated time works (5 ms grid, all samples)", "yes" if ok else "NO", "-", None,
           "both executors", ok)
@@ -197,6 +216,14 @@ def _fig1(b: _Bench) -> None:
     bare = 1e6 * _period_s() / (fl["round_us"] + fl["hop_us"])
     b.row("1 ceiling: empty 5-node ring + /clock hop, + plant step", f"{fl['speed_ceiling']:.1f}x",
           f"{bare:.1f}x (no plant step)", ev["speed"] / fl["speed_ceiling"], ">= 40x", None)
+    from hasel_sysid.bench_graph import pattern_ceiling
+
+    pat = pattern_ceiling(fl, ev["publishes_per_tick"], ev["deliveries_per_tick"], ev["timers_per_tick"])
+    ev["pattern_ceiling"] = pat
+    b.row("1 ceiling of this graph's messages, callbacks empty",
+          f"{pat:.1f}x ({ev['publishes_per_tick']:.0f} publishes x {fl['publish_us']:.1f} us, "
+          f"{ev['deliveries_per_tick']:.0f} deliveries x {fl['delivery_us']:.1f} us)",
+          f"+ plant step {fl['sim_step_us']:.0f} us", ev["speed"] / pat, ">= 40x", pat >= 40.0)
 
 
 def _ring_floor(b: _Bench) -> dict[str, Any]:

@@ -17,11 +17,17 @@
   simulation of one period (:class:`hasel.simulator.PlantSimulator`, no ROS). Any
   graph in which every node of the loop handles every tick costs at least that, so
   ``period / floor`` is a ceiling on its simulated-time speed and
-  ``cores * period / cpu_floor`` a ceiling on the loops that fit on the machine.
+  ``cores * period / cpu_floor`` a ceiling on the loops that fit on the machine. A
+  second ring with one more (do-nothing) subscriber per hop splits a hop into the
+  cost of a publish and of a delivery, so :func:`pattern_ceiling` prices the graph's
+  own message pattern (its publishes and deliveries per tick) with empty callbacks.
 """
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,7 +37,8 @@ import numpy as np
 
 from hasel import paper
 
-__all__ = ["graph_speed", "recorder_vs_bare", "bench_messages", "ring_floor"]
+__all__ = ["graph_speed", "graph_speed_split", "recorder_vs_bare", "bench_messages", "ring_floor",
+           "pattern_ceiling"]
 
 _BATCH = "hasel_msgs/msg/SampleBatch"
 _LOOP_TOPICS = ("/clock", "/sensor/timing", "/laser/stroke", "/strain/stroke", "/strain/stroke_filtered",
@@ -61,7 +68,8 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
         CPU time per wall second, DDS threads included), ``recorded`` (messages per
         topic), ``subscribers`` (per topic), ``callbacks_per_tick`` (deliveries plus
         timers on the simulated clock), ``us_per_callback`` (wall time per tick divided
-        by them), ``sim_time_ok`` and ``sim_time_detail``.
+        by them), ``publishes_per_tick`` and ``deliveries_per_tick`` (of messages on
+        the loop's topics), ``timers_per_tick``, ``sim_time_ok`` and ``sim_time_detail``.
     """
     from hasel.io import info, load_signals
     from hasel_sysid.graph import GraphConfig, NodeGraph
@@ -100,10 +108,12 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
               f"{n_samples} of {want_samples} 10 kHz samples")
     # executor callbacks per tick: every delivery of every message, plus the timers on the simulated clock
     deliveries = sum(recorded.get(t, 0) * n for t, n in subscribers.items()) / max(ticks, 1)
+    publishes = sum(recorded.get(t, 0) for t, n in subscribers.items() if n) / max(ticks, 1)
     per_tick = deliveries + timers
     return {"executor": executor, "sim_s": float(duration_s), "wall_s": wall, "speed": duration_s / wall,
             "cpu_cores": cpu / wall, "ticks": int(ticks), "recorded": recorded, "subscribers": subscribers,
             "callbacks_per_tick": per_tick, "us_per_callback": 1e6 * wall / max(ticks, 1) / per_tick,
+            "publishes_per_tick": publishes, "deliveries_per_tick": deliveries, "timers_per_tick": timers,
             "sim_time_ok": ok, "sim_time_detail": detail}
 
 
@@ -209,8 +219,9 @@ def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executo
     -------
     dict
         ``round_us`` and ``round_cpu_us`` (wall and process CPU time per round, DDS threads
-        included), ``hop_us``, ``sim_step_us`` (one 5 ms period of the 10 kHz plant and its
-        sensors), ``tick_floor_us`` (a round, one more hop for ``/clock``, and a plant
+        included), ``hop_us``, ``delivery_us`` (one more subscriber on every hop, from a
+        second ring with a do-nothing sink on each topic) and ``publish_us`` (the rest of
+        a hop), ``sim_step_us`` (one 5 ms period of the 10 kHz plant and its sensors), ``tick_floor_us`` (a round, one more hop for ``/clock``, and a plant
         step), ``speed_ceiling`` (simulated s per wall s) and ``cpu_per_loop_floor_us``.
     """
     import rclpy
@@ -226,6 +237,18 @@ def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executo
     if n_nodes < 1 or rounds < 1:
         raise ValueError("the ring needs at least one node and one round")
 
+    class _Sink(Node):
+        """A second subscriber on every ring topic, doing nothing: the cost of one more delivery."""
+
+        def __init__(self, ctx: Context) -> None:
+            super().__init__("ring_sink", context=ctx)
+            self.count = 0
+            for i in range(n_nodes):
+                self.create_subscription(Stroke, f"ring{i}", self.on_message, QoSProfile(depth=10))
+
+        def on_message(self, msg: Stroke) -> None:
+            self.count += 1
+
     class _Hop(Node):
         def __init__(self, i: int, ctx: Context) -> None:
             super().__init__(f"ring_hop{i}", context=ctx)
@@ -240,33 +263,42 @@ def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executo
                 return
             self.pub.publish(msg)
 
-    ctx = Context()
-    rclpy.init(args=["--ros-args", "--log-level", "warn"], context=ctx, domain_id=domain_id)
-    nodes: list[_Hop] = []
-    try:
-        nodes = [_Hop(i, ctx) for i in range(n_nodes)]
-        ex = make_executor(executor, ctx)
-        for n in nodes:
-            ex.add_node(n)
-        deadline = time.monotonic() + 10.0
-        while not all(n.pub.get_subscription_count() for n in nodes):
-            if time.monotonic() > deadline:
-                raise RuntimeError("the ring did not connect within 10 s")
-            ex.spin_once(timeout_sec=0.01)
-        head = nodes[0]
-        for count in (200, rounds):  # warm-up, then the measured stretch
-            head.done, head.count, head.stop_after = Future(), 0, count
-            w0, c0 = time.perf_counter(), time.process_time()
-            head.pub.publish(Stroke())
-            ex.spin_until_future_complete(head.done, timeout_sec=120.0)
-            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-            if not head.done.done():
-                raise RuntimeError("the ring lost its message")
-        ex.shutdown()
-    finally:
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+    def run_ring(sink: bool) -> tuple[float, float]:
+        """Wall and CPU time (s) of ``rounds`` rounds, with or without a second subscriber per hop."""
+        ctx = Context()
+        rclpy.init(args=["--ros-args", "--log-level", "warn"], context=ctx, domain_id=domain_id)
+        nodes: list[Node] = []
+        try:
+            nodes = [_Hop(i, ctx) for i in range(n_nodes)]
+            hops = list(nodes)
+            if sink:
+                nodes.append(_Sink(ctx))
+            ex = make_executor(executor, ctx)
+            for n in nodes:
+                ex.add_node(n)
+            deadline = time.monotonic() + 10.0
+            while not all(n.pub.get_subscription_count() >= 1 + sink for n in hops):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the ring did not connect within 10 s")
+                ex.spin_once(timeout_sec=0.01)
+            head = hops[0]
+            for count in (200, rounds):  # warm-up, then the measured stretch
+                head.done, head.count, head.stop_after = Future(), 0, count
+                w0, c0 = time.perf_counter(), time.process_time()
+                head.pub.publish(Stroke())
+                ex.spin_until_future_complete(head.done, timeout_sec=120.0)
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                if not head.done.done():
+                    raise RuntimeError("the ring lost its message")
+            ex.shutdown()
+        finally:
+            for n in nodes:
+                n.destroy_node()
+            rclpy.try_shutdown(context=ctx)
+        return wall, cpu
+
+    wall, cpu = run_ring(False)
+    wall2, _ = run_ring(True)
     sim = PlantSimulator(seed=0)
     sim.step(1.0)
     w0 = time.perf_counter()
@@ -275,8 +307,136 @@ def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executo
     step_us = 1e6 * (time.perf_counter() - w0) / sim_ticks
     round_us, round_cpu_us = 1e6 * wall / rounds, 1e6 * cpu / rounds
     hop_us = round_us / n_nodes
+    # a hop is one publish and one delivery; the sink adds one delivery per hop
+    delivery_us = max(0.0, (1e6 * wall2 / rounds - round_us) / n_nodes)
+    publish_us = max(0.0, hop_us - delivery_us)
     floor = round_us + hop_us + step_us
     return {"n_nodes": n_nodes, "rounds": rounds, "executor": executor, "round_us": round_us,
-            "round_cpu_us": round_cpu_us, "hop_us": hop_us, "sim_step_us": step_us, "tick_floor_us": floor,
+            "round_cpu_us": round_cpu_us, "hop_us": hop_us, "delivery_us": delivery_us,
+            "publish_us": publish_us, "sim_step_us": step_us, "tick_floor_us": floor,
             "speed_ceiling": 1e6 * paper.LOOP_PERIOD_S / floor,
             "cpu_per_loop_floor_us": round_cpu_us + step_us}
+
+
+def pattern_ceiling(floor: dict[str, Any], publishes: float, deliveries: float, timers: float = 0.0) -> float:
+    """Simulated s per wall s of a lockstep graph that only moves its messages.
+
+    ``publishes`` and ``deliveries`` per tick (and timers, costed as deliveries) at the
+    empty costs measured by :func:`ring_floor`, plus its plant step: what a graph with
+    this message pattern could reach if every callback did no work at all.
+    """
+    tick_us = publishes * floor["publish_us"] + (deliveries + timers) * floor["delivery_us"] + floor["sim_step_us"]
+    return 1e6 * paper.LOOP_PERIOD_S / tick_us
+
+
+def graph_speed_split(duration_s: float, domain_id: int, directory: str | os.PathLike[str],
+                      seed: int = 0) -> dict[str, Any]:
+    """The same recorded graph with the recorder in a process of its own (the other core).
+
+    The loop's nodes run lockstep in this process with ``EventsExecutor``; a child
+    process runs the recorder node (same QoS, same topics) on its own executor. The
+    loop does not wait for the recorder, so what it cannot keep up with is lost:
+    the messages recorded are compared with those the loop published.
+
+    Returns
+    -------
+    dict
+        ``speed`` (simulated s per wall s), ``cpu_us_per_tick`` (the loop's process),
+        ``recorder_cpu_us_per_tick``, ``published`` and ``recorded`` (messages on the
+        loop's topics), ``lost``.
+    """
+    from hasel_sysid.graph import GraphConfig, NodeGraph
+
+    path = Path(directory) / "graph_split.mcap"
+    stop = Path(str(path) + ".stop")
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    child = subprocess.Popen([sys.executable, "-m", "hasel_sysid.bench_graph", "recorder", str(path),
+                              str(domain_id)], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        seq = [2.0, 4.0, 6.0, 4.0, 2.0]
+        cfg = GraphConfig(sequence_mm=seq, hold_s=duration_s / len(seq), seed=seed, executor="events",
+                          domain_id=domain_id, with_collector=False)
+        with NodeGraph(cfg) as g:
+            pubs = {"/clock": g.plant.clock_pub, "/sensor/timing": g.plant.timing_pub,
+                    "/laser/stroke": g.plant.laser_pub, "/plant/batch": g.plant.batch_pub,
+                    "/strain/stroke": g.driver.pub, "/strain/stroke_filtered": g.filter.pub,
+                    "/amp/command": g.controller.cmd_pub, "/controller/state": g.controller.state_pub,
+                    "/amp/applied": g.amplifier.applied_pub}
+            deadline = time.monotonic() + 30.0
+            # the recorder in the other process must be matched on every loop topic first
+            while not all(p.get_subscription_count() >= 1 + (t in ("/amp/applied",)) for t, p in pubs.items()):
+                if time.monotonic() > deadline or child.poll() is not None:
+                    raise RuntimeError("the recorder process did not connect within 30 s")
+                g.executor.spin_once(timeout_sec=0.05)
+            g.wait_ready()
+            sent = {t: 0 for t in pubs}
+            for t, p in pubs.items():  # count what the loop really publishes (skipped ones are not sent)
+                p.publish = _counting(p.publish, sent, t)
+            w0, c0 = time.perf_counter(), time.process_time()
+            g.run(duration_s, wall_timeout_s=600.0)
+            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            ticks = g.plant.sim.tick
+            time.sleep(1.0)  # let the recorder drain what is still in flight
+            stop.touch()
+            line = child.stdout.readline()
+        child.wait(timeout=30)
+        rec = json.loads(line)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    from hasel.io import info
+
+    counts = {t.topic: int(t.count) for t in info(path).topics}
+    recorded = sum(counts.get(t, 0) for t in pubs)
+    published = sum(sent.values())
+    return {"sim_s": float(duration_s), "wall_s": wall, "speed": duration_s / wall, "ticks": int(ticks),
+            "cpu_us_per_tick": 1e6 * cpu / max(ticks, 1),
+            "recorder_cpu_us_per_tick": 1e6 * rec["cpu_s"] / max(ticks, 1),
+            "published": published, "recorded": recorded, "lost": published - recorded, "per_topic": counts,
+            "sent_per_topic": sent}
+
+
+def _counting(publish, counts: dict[str, int], topic: str):
+    """``publish`` that also counts its calls in ``counts[topic]``."""
+    def wrapped(msg) -> None:
+        counts[topic] += 1
+        publish(msg)
+    return wrapped
+
+
+def _recorder_main(argv: list[str]) -> int:
+    """Child of :func:`graph_speed_split`: record until ``PATH.stop`` exists; print CPU as JSON."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.experimental import EventsExecutor
+    from rclpy.task import Future
+
+    from hasel_sysid.recording import recorder_factory
+
+    path, domain = argv[0], int(argv[1])
+    stop = Path(path + ".stop")
+    ctx = Context()
+    rclpy.init(args=["--ros-args", "--log-level", "warn"], context=ctx, domain_id=domain)
+    node = recorder_factory(path, list(_LOOP_TOPICS))(ctx)
+    ex = EventsExecutor(context=ctx)
+    ex.add_node(node)
+    c0 = time.process_time()
+    try:
+        end = time.monotonic() + 900.0
+        while not stop.exists() and time.monotonic() < end:
+            ex.spin_until_future_complete(Future(), timeout_sec=0.1)
+        cpu = time.process_time() - c0
+    finally:
+        ex.shutdown()
+        node.destroy_node()  # closes the file
+        rclpy.try_shutdown(context=ctx)
+    sys.stdout.write(json.dumps({"cpu_s": cpu}) + "\n")
+    sys.stdout.flush()
+    return 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["recorder"]:
+        sys.exit(_recorder_main(sys.argv[2:]))
+    sys.exit(f"usage: python -m hasel_sysid.bench_graph recorder PATH DOMAIN (got {sys.argv[1:]})")
