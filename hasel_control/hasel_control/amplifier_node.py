@@ -22,7 +22,8 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
-from hasel_driver.rosutil import Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
+from hasel_driver.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
+                                  validate_with)
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 __all__ = ["HvAmplifierNode", "main"]

@@ -33,7 +33,8 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.faults import PlausibilityGate, StuckDetector
 from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
-from hasel_driver.rosutil import Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos, validate_with
+from hasel_driver.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
+                                  validate_with)
 from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
 
 __all__ = ["PidControllerNode", "main", "FEEDBACK_TOPICS"]

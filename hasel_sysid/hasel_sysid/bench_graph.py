@@ -221,8 +221,9 @@ def ring_floor(n_nodes: int = 5, rounds: int = 5000, domain_id: int = 0, executo
         ``round_us`` and ``round_cpu_us`` (wall and process CPU time per round, DDS threads
         included), ``hop_us``, ``delivery_us`` (one more subscriber on every hop, from a
         second ring with a do-nothing sink on each topic) and ``publish_us`` (the rest of
-        a hop), ``sim_step_us`` (one 5 ms period of the 10 kHz plant and its sensors), ``tick_floor_us`` (a round, one more hop for ``/clock``, and a plant
-        step), ``speed_ceiling`` (simulated s per wall s) and ``cpu_per_loop_floor_us``.
+        a hop), ``sim_step_us`` (one 5 ms period of the 10 kHz plant and its sensors),
+        ``tick_floor_us`` (a round, one more hop for ``/clock``, and a plant step),
+        ``speed_ceiling`` (simulated s per wall s) and ``cpu_per_loop_floor_us``.
     """
     import rclpy
     from rclpy.context import Context
