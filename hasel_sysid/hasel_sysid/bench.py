@@ -277,6 +277,15 @@ def _lat(s: dict) -> str:
     return f"{s['p50_us']:.0f}/{s['p99_us']:.0f}/{s['max_us']:.0f} us"
 
 
+def _bursts_text(s: dict) -> str:
+    """' (in 1 burst at 23.4 s)' when the misses of a run came in bursts, else ''."""
+    bursts = s.get("miss_bursts") or []
+    if not bursts:
+        return ""
+    at = ", ".join(f"{a:.1f} s" for a, _, _ in bursts[:3]) + (", ..." if len(bursts) > 3 else "")
+    return f" (in {len(bursts)} burst{'s' if len(bursts) > 1 else ''} at {at})"
+
+
 def _fig3(b: _Bench) -> None:
     dur, base = (5.0, 2.0) if b.quick else (60.0, 10.0)
     b.say(f"3: one loop at 200 Hz in real time, one process, {dur:g} s")
@@ -287,7 +296,7 @@ def _fig3(b: _Bench) -> None:
     ratio = one["p99_us"] / split["p99_us"] if split["p99_us"] > 0 else math.nan
     b.row(f"3 200 Hz latency p50/p99/max (1 process, {_sched(one)})", _lat(one), _lat(split) + " (2 proc)", ratio,
           "p99 < 1000 us", one["p99_us"] < 1000.0)
-    b.row("3 200 Hz missed periods (1 process)", f"{one['missed']} of {one['expected_ticks']}",
+    b.row("3 200 Hz missed periods (1 process)", f"{one['missed']} of {one['expected_ticks']}{_bursts_text(one)}",
           f"{split['missed']} of {split['expected_ticks']} (2 proc)", None, "0", one["missed"] == 0)
 
 
@@ -319,9 +328,11 @@ def _fig4(b: _Bench) -> None:
             # only periods missed: one stall of the (virtual) machine misses a period in
             # every loop at once, so a count is measured a second time before it counts
             # as not held; both measurements are in the JSON
-            b.say(f"4:   {n} loops missed {100 * s['missed_fraction']:.2f} % of periods; measuring once more")
+            b.say(f"4:   {n} loops missed {100 * s['missed_fraction']:.2f} % of periods{_bursts_text(s)}; "
+                  "measuring once more")
             again = _scale_point(b, n, 2, dur)
-            again["first_try"] = {k: s[k] for k in ("missed", "missed_fraction", "p99_us", "worst_loop_p99_us")}
+            again["first_try"] = {k: s[k] for k in ("missed", "missed_fraction", "p99_us", "worst_loop_p99_us",
+                                                    "miss_bursts")}
             s = again
         curve.append(s)
         b.say(f"4:   p99 {s['p99_us']:.0f} us (worst loop {s['worst_loop_p99_us']:.0f}), missed "
@@ -488,7 +499,8 @@ def _fig7(b: _Bench) -> None:
     ratio = loaded["p99_us"] / unloaded["p99_us"] if unloaded["p99_us"] > 0 else math.nan
     b.row(f"7 200 Hz + busy core: p50/p99/max ({_sched(loaded)})", _lat(loaded), _lat(unloaded) + " (no load)", ratio,
           "p99 < 1000 us", loaded["p99_us"] < 1000.0)
-    b.row("7 200 Hz + busy core: missed periods", f"{loaded['missed']} of {loaded['expected_ticks']}",
+    b.row("7 200 Hz + busy core: missed periods", f"{loaded['missed']} of {loaded['expected_ticks']}"
+          f"{_bursts_text(loaded)}",
           f"{unloaded['missed']} of {unloaded['expected_ticks']} (no load)", None, "0", loaded["missed"] == 0)
 
 

@@ -247,11 +247,7 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
             # counting, or the stall of the set-up is counted as missed periods
             _spin_for(ex, 1.0)
         for p in plants:
-            p.latencies_ns.clear()
-            p.missed_periods = 0
-            p.skipped_periods = 0
-            p.missed_at_ns.clear()
-            p.ticks = 0
+            p.reset_wall_stats()
         pauses: list[tuple[float, int, float]] = []  # (start s, generation, ms): to explain missed periods
         gc_watch = _gc_watch(pauses)
         gc.callbacks.append(gc_watch)
@@ -265,7 +261,8 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
             loops.append({"ns": p.get_namespace(), "latencies_us": [x / 1e3 for x in p.latencies_ns],
                           "missed": int(p.missed_periods), "ticks": int(p.ticks), "expected": expected,
                           "skipped": int(p.skipped_periods),
-                          "missed_at_s": [x * 1e-9 for x in p.missed_at_ns]})
+                          "missed_at_s": [x * 1e-9 - w0 for x in p.missed_at_ns],
+                          "skipped_at_s": [x * 1e-9 - w0 for x in p.skipped_at_ns]})
         result = {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
                   "scheduler": sched, "gc_pauses": [p for p in pauses if p[2] >= 1.0], "t_start": w0}
         if measured is not None:
@@ -303,23 +300,42 @@ def latency_summary(loops: Sequence[dict]) -> dict[str, Any]:
     """Pooled latency percentiles (us) and missed periods over ``loops`` (from :func:`run_worker`).
 
     ``missed`` counts both outputs that came after the next tick and ticks the timer
-    skipped; ``worst_loop_p99_us`` is the largest per-loop p99.
+    skipped; ``worst_loop_p99_us`` is the largest per-loop p99; ``miss_bursts`` groups
+    the misses in time (s from the start of the window; see :func:`_bursts`).
     """
     lat = np.concatenate([np.asarray(l["latencies_us"], float) for l in loops]) if loops else np.empty(0)
     expected = sum(l["expected"] for l in loops)
     skipped = sum(l["skipped"] for l in loops)
     late = sum(l["missed"] for l in loops)
     per_p99 = [float(np.percentile(l["latencies_us"], 99)) for l in loops if len(l["latencies_us"])]
+    events = sorted(t for l in loops for t in l.get("missed_at_s", []) + l.get("skipped_at_s", []))
     out = {"loops": len(loops), "samples": int(lat.size), "expected_ticks": int(expected),
            "ticks": int(sum(l["ticks"] for l in loops)), "late_outputs": int(late), "skipped_ticks": int(skipped),
            "missed": int(late + skipped), "missed_fraction": (late + skipped) / expected if expected else math.nan,
-           "unanswered": int(sum(l["ticks"] for l in loops) - lat.size)}
+           "unanswered": int(sum(l["ticks"] for l in loops) - lat.size),
+           "miss_bursts": _bursts(events)}
     if lat.size:
         out.update(p50_us=float(np.percentile(lat, 50)), p99_us=float(np.percentile(lat, 99)),
                    max_us=float(lat.max()), worst_loop_p99_us=max(per_p99))
     else:
         out.update(p50_us=math.nan, p99_us=math.nan, max_us=math.nan, worst_loop_p99_us=math.nan)
     return out
+
+
+def _bursts(times_s: Sequence[float], gap_s: float = 0.1) -> list[list[float]]:
+    """Misses grouped in time: [[start s, end s, events], ...] (events closer than ``gap_s``).
+
+    A stall of the machine or of a process misses periods in every loop at once, in one
+    burst; scattered single misses point at the loops' own load instead.
+    """
+    out: list[list[float]] = []
+    for t in times_s:
+        if out and t - out[-1][1] <= gap_s:
+            out[-1][1] = t
+            out[-1][2] += 1
+        else:
+            out.append([t, t, 1])
+    return [[round(a, 3), round(b, 3), n] for a, b, n in out]
 
 
 # -- processes ---------------------------------------------------------------------------

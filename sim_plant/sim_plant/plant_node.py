@@ -88,12 +88,7 @@ class PlantNode(Node):
         self.sequence = 0
         self._last_progress = time.monotonic()
         self._waiters: list[tuple[float, object]] = []
-        self.latencies_ns: list[int] = []  # wall mode: sensor stamp -> amplifier output, ns
-        self.missed_periods = 0
-        self.missed_at_ns: list[int] = []  # wall mode: stamps of the ticks left unanswered, ns
-        self.skipped_periods = 0  # wall mode: periods the timer skipped (woken more than a period late)
-        self._last_wake_ns: int | None = None
-        self.ticks = 0
+        self.reset_wall_stats()
         self._wall_tick_ns: int | None = None
         self._answered = True
 
@@ -211,6 +206,24 @@ class PlantNode(Node):
             self._notify()
 
     # -- wall mode ----------------------------------------------------------------------
+    def reset_wall_stats(self) -> None:
+        """Forget the real-time loop's statistics (and the phase of the timer's schedule).
+
+        Kept per tick in wall mode: ``latencies_ns`` (sensor stamp to the amplifier's
+        output, ns), ``missed_periods`` and ``missed_at_ns`` (ticks whose output had not
+        arrived by the next tick, and their stamps), ``skipped_periods`` and
+        ``skipped_at_ns`` (periods the timer skipped because it woke a period or more
+        late, steady-clock ns), ``ticks``.
+        """
+        self.latencies_ns: list[int] = []
+        self.missed_periods = 0
+        self.missed_at_ns: list[int] = []
+        self.skipped_periods = 0
+        self.skipped_at_ns: list[int] = []
+        self.ticks = 0
+        self._first_wake_ns: int | None = None
+        self._tick_index = 0
+
     def on_wall_tick(self) -> None:
         """Real-time mode: step with the latest command, stamp with the node's clock.
 
@@ -218,13 +231,21 @@ class PlantNode(Node):
         the amplifier output carrying that stamp, and the periods whose output did not
         arrive before the next tick (missed periods).
         """
+        wake = time.monotonic_ns()
         if self._wall_tick_ns is not None and not self._answered:
             self.missed_periods += 1
-            self.missed_at_ns.append(self._wall_tick_ns)
-        wake = time.monotonic_ns()
-        if self._last_wake_ns is not None:  # the timer skips the periods it woke too late for
-            self.skipped_periods += max(0, round((wake - self._last_wake_ns) / self.period_ns) - 1)
-        self._last_wake_ns = wake
+            self.missed_at_ns.append(wake)
+        # which period of the timer's schedule this wake-up serves: a wake-up less than a
+        # period late still serves its own (the timer keeps its schedule), one that
+        # jumps periods means the timer skipped them
+        if self._first_wake_ns is None:
+            self._first_wake_ns, self._tick_index = wake, 0
+        else:
+            index = (wake - self._first_wake_ns + self.period_ns // 10) // self.period_ns
+            if index > self._tick_index + 1:
+                self.skipped_periods += index - self._tick_index - 1
+                self.skipped_at_ns.append(wake)
+            self._tick_index = max(index, self._tick_index + 1)
         block = self.sim.step(self.command)
         if self.publish_batch and self.batch_pub.get_subscription_count():
             self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
