@@ -75,6 +75,8 @@ def test_realtime_worker_reports_every_tick_of_one_loop():
     r = run_worker(WorkerSpec((0,), duration_s=1.0, warmup_s=0.5, domain_id=private_domain()))
     (loop,) = r["loops"]
     assert loop["ns"] == "/rt0" and loop["expected"] == pytest.approx(200, abs=2)
+    # every period of the window is either a tick or one the timer skipped (counted from its schedule)
+    assert abs(loop["ticks"] + loop["skipped"] - loop["expected"]) <= 1
     s = latency_summary(r["loops"])
     assert s["samples"] > 0 and s["samples"] + s["unanswered"] == s["ticks"]
     for k in ("p50_us", "p99_us", "max_us"):
@@ -86,3 +88,18 @@ def test_only_rejects_unknown_figures(tmp_path):
     args = argparse.Namespace(quick=True, json=str(tmp_path / "b.json"), only="9", cache=str(tmp_path))
     with pytest.raises(bench.BadInputError, match="--only"):
         bench.run(args)
+
+
+def test_misses_are_grouped_in_bursts_and_counted_from_the_loops():
+    from hasel_sysid.bench_rt import _bursts
+
+    # two loops stalled together at 4.48 s (one burst), one late tick of its own at 7 s
+    loops = [{"latencies_us": [200.0] * 10, "missed": 2, "ticks": 1600, "expected": 1600, "skipped": 1,
+              "missed_at_s": [4.481, 4.49], "skipped_at_s": [4.52]},
+             {"latencies_us": [300.0] * 10, "missed": 1, "ticks": 1600, "expected": 1600, "skipped": 1,
+              "missed_at_s": [7.0], "skipped_at_s": [4.5]}]
+    s = latency_summary(loops)
+    assert s["missed"] == 5 and s["late_outputs"] == 3 and s["skipped_ticks"] == 2
+    assert s["missed_fraction"] == pytest.approx(5 / 3200)
+    assert s["miss_bursts"] == [[4.481, 4.52, 4], [7.0, 7.0, 1]]
+    assert _bursts([]) == [] and _bursts([1.0, 1.05, 1.2], gap_s=0.1) == [[1.0, 1.05, 2], [1.2, 1.2, 1]]
