@@ -112,7 +112,7 @@ class StrainSensor:
         self._ramps: dict[tuple[int, float], np.ndarray] = {}
         self._pattern = self._landing_pattern(rate_hz, config.trigger_hz)
         self._i = 0  # index of the next simulator sample (exact, for the periodic pattern)
-        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, int]] = {}
+        self._blocks: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def ideal_us(self, stroke_mm: np.ndarray) -> np.ndarray:
         """Noise-free pulse width (us) for strokes in mm: 1.1 R C0 (1 + k z)."""
@@ -136,8 +136,8 @@ class StrainSensor:
         land = np.array([math.ceil(j * p / q - 1e-9) for j in range(q)])
         return p, land
 
-    def _block(self, i0: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
-        """For samples [i0, i0 + n): the sample (from i0) of each trigger, samples each reading holds, first."""
+    def _block(self, i0: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """For samples [i0, i0 + n): the sample (from i0) of each trigger, and the samples each reading holds."""
         p, land = self._pattern
         key = (i0 % p, n)
         hit = self._blocks.get(key)
@@ -147,7 +147,7 @@ class StrainSensor:
             at = (np.arange(cycles)[:, None] * p + land[None, :]).ravel()  # from the pattern's start before i0
             idx = at[(at >= r) & (at < r + n)] - r
             counts = np.diff(idx, append=n)
-            hit = self._blocks[key] = (idx, counts, int(idx[0]) if idx.size else n)
+            hit = self._blocks[key] = (idx, counts)
         return hit
 
     def measure(self, stroke_mm: np.ndarray, applied_kv: np.ndarray) -> np.ndarray:
@@ -157,52 +157,41 @@ class StrainSensor:
         n = z.size
         if n == 0:
             return np.empty(0)
-        if self._pattern is not None:
-            return self._measure_pattern(z, v, n)
+        if self._pattern is not None:  # the trigger samples from the periodic pattern
+            idx, counts = self._block(self._i, n)
+            self._i += n
+            return self._hold_readings(z, v, idx, counts)
         t = self._t + self._ramp(n, self.dt)
+        self._t = float(t[-1] + self.dt)
         # trigger instants inside this block and the sample index where each lands
         k = max(0, math.floor((float(t[-1]) - self._next_trigger) / self.trigger_period + 1e-9) + 1)
-        out = np.empty(n)
-        if k:
-            trig = self._next_trigger + self._ramp(k, self.trigger_period)
-            idx = np.minimum(np.searchsorted(t, trig - 1e-12), n - 1)
-            c = self.config
-            sigma = c.noise_us + c.noise_us_per_kv * np.abs(v[idx])
-            reading = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[idx]) + sigma * self.rng.standard_normal(k)
-            reading = np.round(reading / c.tick_us) * c.tick_us
-            # hold each reading from its sample until the next reading (a later one on the
-            # same sample wins: it gets no samples of its own)
-            first = int(idx[0])
-            out[:first] = self._last_us
-            out[first:] = np.repeat(reading, np.diff(idx, append=n))
-            self._last_us = float(reading[-1])
-            self._next_trigger = float(trig[-1] + self.trigger_period)
-        else:
-            out[:] = self._last_us
-        self._t = float(t[-1] + self.dt)
-        return out
+        if not k:
+            return np.full(n, self._last_us)
+        trig = self._next_trigger + self._ramp(k, self.trigger_period)
+        self._next_trigger = float(trig[-1] + self.trigger_period)
+        idx = np.minimum(np.searchsorted(t, trig - 1e-12), n - 1)
+        return self._hold_readings(z, v, idx, np.diff(idx, append=n))
 
-    def _measure_pattern(self, z: np.ndarray, v: np.ndarray, n: int) -> np.ndarray:
-        """:meth:`measure` when the trigger instants follow a periodic pattern of samples."""
-        idx, counts, first = self._block(self._i, n)
-        self._i += n
+    def _hold_readings(self, z: np.ndarray, v: np.ndarray, idx: np.ndarray, counts: np.ndarray) -> np.ndarray:
+        """Readings taken at the samples ``idx`` of the block, each held for ``counts`` samples (us)."""
+        n = z.size
+        if not idx.size:
+            return np.full(n, self._last_us)
+        c = self.config
+        sigma = np.abs(v[idx])
+        sigma *= c.noise_us_per_kv
+        sigma += c.noise_us
+        reading = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[idx]) + sigma * self.rng.standard_normal(idx.size)
+        reading /= c.tick_us
+        np.rint(reading, out=reading)  # whole ticks of the MCU's timer
+        reading *= c.tick_us
+        # hold each reading from its sample until the next reading (a later one on the
+        # same sample wins: it has a count of 0)
         out = np.empty(n)
-        k = idx.size
-        if k:
-            c = self.config
-            sigma = np.abs(v[idx])
-            sigma *= c.noise_us_per_kv
-            sigma += c.noise_us
-            reading = c.rest_pulse_us * (1.0 + c.stretch_per_mm * z[idx]) + sigma * self.rng.standard_normal(k)
-            reading /= c.tick_us
-            np.rint(reading, out=reading)  # whole ticks of the MCU's timer
-            reading *= c.tick_us
-            # a later reading on the same sample wins: the earlier one has a count of 0
-            out[:first] = self._last_us
-            out[first:] = np.repeat(reading, counts)
-            self._last_us = float(reading[-1])
-        else:
-            out[:] = self._last_us
+        first = int(idx[0])
+        out[:first] = self._last_us
+        out[first:] = np.repeat(reading, counts)
+        self._last_us = float(reading[-1])
         return out
 
     def _ramp(self, n: int, step: float) -> np.ndarray:
