@@ -265,6 +265,7 @@ def _rt_single(b: _Bench, duration_s: float, roles: str = "all") -> dict[str, An
     s["duration_s"] = duration_s
     s["load_avg"] = _load()
     s["scheduler"] = res[0]["scheduler"]
+    s["gc_pauses"] = [p for r in res for p in r["gc_pauses"]]  # (start, generation, ms): a cause of bursts?
     return s
 
 
@@ -311,7 +312,7 @@ def _scale_point(b: _Bench, n: int, workers: int, duration_s: float) -> dict[str
     wall = max(r["wall_s"] for r in res)
     s.update(n=n, workers=w, cpu_cores=sum(r["cpu_s"] for r in res) / wall,
              cpu_per_worker=[r["cpu_s"] / r["wall_s"] for r in res], load_avg=_load(),
-             scheduler=res[0]["scheduler"])
+             scheduler=res[0]["scheduler"], gc_pauses=[p for r in res for p in r["gc_pauses"]])
     s["held"] = bool(s["missed_fraction"] < 1e-3 and s["worst_loop_p99_us"] < 2000.0)
     return s
 

@@ -264,7 +264,9 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
                           "missed_at_s": [x * 1e-9 - w0 for x in p.missed_at_ns],
                           "skipped_at_s": [x * 1e-9 - w0 for x in p.skipped_at_ns]})
         result = {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
-                  "scheduler": sched, "gc_pauses": [p for p in pauses if p[2] >= 1.0], "t_start": w0}
+                  "scheduler": sched, "t_start": w0,
+                  # collections of 1 ms or more: (s from the window's start, generation, ms)
+                  "gc_pauses": [(round(a - w0, 3), g, round(ms, 2)) for a, g, ms in pauses if ms >= 1.0]}
         if measured is not None:
             measured(result)
         return result
