@@ -14,7 +14,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 
 from hasel_control.amplifier_node import HvAmplifierNode
-from hasel_driver.rosutil import topic_qos
+from hasel_ros.rosutil import topic_qos
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 

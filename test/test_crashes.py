@@ -15,7 +15,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from hasel_driver.rosutil import from_stamp
+from hasel_ros.rosutil import from_stamp
 from hasel_msgs.msg import ControllerState, VoltageCommand
 
 INSTALL = Path(__file__).resolve().parents[1] / "install"

@@ -11,7 +11,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
-from hasel_driver.rosutil import topic_qos
+from hasel_ros.rosutil import topic_qos
 from hasel_msgs.msg import ControllerState
 
 TALKER = textwrap.dedent("""

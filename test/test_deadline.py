@@ -7,7 +7,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from hasel_driver.rosutil import Deadline
+from hasel_ros.rosutil import Deadline
 
 PERIOD_NS = 5_000_000  # one 200 Hz tick
 

@@ -16,7 +16,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hasel_control.amplifier_node import HvAmplifierNode
 from hasel_control.controller_node import PidControllerNode
-from hasel_driver.rosutil import to_stamp, topic_qos
+from hasel_ros.rosutil import to_stamp, topic_qos
 from hasel_msgs.msg import Reference, Stroke, VoltageCommand
 
 

@@ -11,7 +11,7 @@ from rclpy.experimental import EventsExecutor
 
 from hasel_driver.driver_node import StrainDriverNode
 from hasel_driver.filter_node import LowPassNode
-from hasel_driver.rosutil import topic_qos
+from hasel_ros.rosutil import topic_qos
 from hasel_msgs.msg import Stroke
 from hasel_sysid.replay import Replayer, read_raw
 from hasel_sysid.steps import run_steps

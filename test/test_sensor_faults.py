@@ -9,7 +9,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from hasel_driver.rosutil import from_stamp, topic_qos
+from hasel_ros.rosutil import from_stamp, topic_qos
 from hasel_msgs.msg import Stroke
 from hasel_sysid.graph import GraphConfig, NodeGraph
 

@@ -12,7 +12,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
 from hasel.serialproto import LineBuffer, McuModel, encode
-from hasel_driver.rosutil import topic_qos
+from hasel_ros.rosutil import topic_qos
 from hasel_driver.serial_node import SerialBridgeNode
 from hasel_msgs.msg import SensorTiming, VoltageCommand
 

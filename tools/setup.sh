@@ -64,10 +64,10 @@ if ! stamp_ok msgs "$msgs_hash" || [ ! -f install/hasel_msgs/share/hasel_msgs/pa
   stamp_set msgs "$msgs_hash"
   rm -f "$STAMPS/python_pkgs"
 fi
-py_hash=$(tree_hash hasel_driver hasel_control sim_plant hasel_sysid)
+py_hash=$(tree_hash hasel_ros hasel_driver hasel_control sim_plant hasel_sysid)
 if ! stamp_ok python_pkgs "$py_hash" || [ ! -f install/setup.sh ]; then
-  echo "[setup] colcon build hasel_driver hasel_control sim_plant hasel_sysid"
-  colcon_build --packages-select hasel_driver hasel_control sim_plant hasel_sysid
+  echo "[setup] colcon build hasel_ros hasel_driver hasel_control sim_plant hasel_sysid"
+  colcon_build --packages-select hasel_ros hasel_driver hasel_control sim_plant hasel_sysid
   stamp_set python_pkgs "$py_hash"
 fi
 echo "[setup] ready: .venv/bin/hasel --help"

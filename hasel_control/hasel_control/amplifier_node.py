@@ -22,7 +22,7 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
-from hasel_driver.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
                                   validate_with)
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 

@@ -33,7 +33,7 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.faults import PlausibilityGate, StuckDetector
 from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
-from hasel_driver.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
                                   validate_with)
 from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
 

@@ -14,7 +14,7 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.errors import BadInputError
-from hasel_driver.rosutil import declare, run_node, to_stamp, topic_qos
+from hasel_ros.rosutil import declare, run_node, to_stamp, topic_qos
 from hasel_msgs.msg import Reference
 
 __all__ = ["ReferenceNode", "main"]

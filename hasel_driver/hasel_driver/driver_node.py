@@ -15,7 +15,7 @@ from rclpy.node import Node
 
 from hasel.calibration import Calibration
 from hasel.loop import default_calibration
-from hasel_driver.rosutil import declare, run_node, topic_qos, validate_with
+from hasel_ros.rosutil import declare, run_node, topic_qos, validate_with
 from hasel_msgs.msg import SensorTiming, Stroke
 
 __all__ = ["StrainDriverNode", "main"]

@@ -16,7 +16,7 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.filters import LowPass
-from hasel_driver.rosutil import declare, run_node, topic_qos
+from hasel_ros.rosutil import declare, run_node, topic_qos
 from hasel_msgs.msg import Stroke
 
 __all__ = ["LowPassNode", "main"]

@@ -24,7 +24,7 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.serialproto import LineBuffer, encode
-from hasel_driver.rosutil import declare, diagnostic, run_node, topic_qos
+from hasel_ros.rosutil import declare, diagnostic, run_node, topic_qos
 from hasel_msgs.msg import SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["SerialBridgeNode", "main"]

@@ -30,7 +30,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.signals import Schedule, protocol_schedule
-from hasel_driver.rosutil import to_stamp, topic_qos
+from hasel_ros.rosutil import to_stamp, topic_qos
 from hasel_msgs.msg import ExperimentMarker, SampleBatch, VoltageCommand
 
 __all__ = ["ExperimentNode", "run", "run_chirp"]

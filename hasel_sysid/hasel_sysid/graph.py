@@ -34,7 +34,7 @@ from hasel_control.controller_node import PidControllerNode
 from hasel_control.reference_node import ReferenceNode
 from hasel_driver.driver_node import StrainDriverNode
 from hasel_driver.filter_node import LowPassNode
-from hasel_driver.rosutil import from_stamp, topic_qos
+from hasel_ros.rosutil import from_stamp, topic_qos
 from hasel_msgs.msg import ControllerState, SampleBatch, Stroke, VoltageCommand
 from sim_plant.plant_node import PlantNode
 

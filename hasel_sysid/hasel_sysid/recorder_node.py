@@ -24,7 +24,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from hasel.io.writer import QosProfile, Ros2McapWriter
 from hasel.topics import TOPICS
-from hasel_driver.rosutil import declare, message_class, qos, run_node
+from hasel_ros.rosutil import declare, message_class, qos, run_node
 
 __all__ = ["RecorderNode", "main"]
 

@@ -21,7 +21,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hasel.errors import BadInputError, DataFileError
-from hasel_driver.rosutil import message_class
+from hasel_ros.rosutil import message_class
 
 __all__ = ["RawMessage", "read_raw", "Replayer", "parse_remaps", "run_replay", "run_record"]
 

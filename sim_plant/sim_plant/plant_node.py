@@ -37,7 +37,7 @@ from hasel import plantspec
 from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
-from hasel_driver.rosutil import declare, float64_array, run_node, topic_qos
+from hasel_ros.rosutil import declare, float64_array, run_node, topic_qos
 from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["PlantNode", "main", "make_actuator"]

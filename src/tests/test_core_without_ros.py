@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 CORE = Path(__file__).resolve().parents[1] / "hasel"
-ROS_ROOTS = {"rclpy", "rosidl_runtime_py", "hasel_msgs", "hasel_driver", "hasel_control", "sim_plant",
+ROS_ROOTS = {"rclpy", "rosidl_runtime_py", "hasel_msgs", "hasel_driver", "hasel_control", "sim_plant", "hasel_ros",
              "hasel_sysid", "std_msgs", "builtin_interfaces", "rosgraph_msgs", "diagnostic_msgs"}
 
 

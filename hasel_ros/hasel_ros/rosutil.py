@@ -1,7 +1,8 @@
 """ROS plumbing shared by the toolkit's nodes: QoS, time stamps, parameters, diagnostics, main().
 
-Kept in hasel_driver, the lowest package of the graph; hasel_control, sim_plant and
-hasel_sysid import it. Arithmetic stays in the core library ``hasel``.
+Its own package (hasel_ros), below every node package: hasel_driver, hasel_control,
+sim_plant and hasel_sysid import it and declare it. Arithmetic and decisions stay in the
+core library ``hasel``.
 """
 from __future__ import annotations
 
