@@ -11,19 +11,22 @@ periods gives 0 kV, and shutdown commands 0 kV. It publishes every applied comma
 The paper's -1 kV charge reversal is a separate, deliberate request on
 ``/amp/precondition`` (bounded to [-2, 0] kV); the controller's path cannot produce a
 negative voltage because v_min_kv cannot be negative.
+
+Every decision is :class:`hasel.amplifier.AmplifierCore`'s; this node only translates
+messages into core calls and the results into messages.
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from hasel import paper
-from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
-from hasel_ros.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
-                                  validate_with)
+from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Reason, Watchdog
+from hasel.faults import Notice
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, run_node, to_stamp, topic_qos,
+                               validate_with)
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 __all__ = ["HvAmplifierNode", "main"]
@@ -41,12 +44,8 @@ class HvAmplifierNode(Node):
                                 read_only=True)
         periods = declare(self, "watchdog_periods", 3.0, "periods without a command before 0 kV",
                           lo=1.0, hi=10.0)
-        self.limits = HvLimits(v_min, v_max)
-        self.watchdog = Watchdog(self.period_s, periods)
+        self.core = AmplifierCore(HvLimits(v_min, v_max), Watchdog(self.period_s, periods))
         self.add_on_set_parameters_callback(validate_with(self._on_params))
-        self.output_kv = 0.0
-        self.last_reason = Reason.NONE
-        self.tripped = False
         self.applied_pub = self.create_publisher(VoltageCommand, "amp/applied", topic_qos("/amp/applied"))
         self._applied = VoltageCommand()
         self.batch_pub = self.create_publisher(SampleBatch, "amp/applied_batch", topic_qos("/amp/applied_batch"))
@@ -66,65 +65,77 @@ class HvAmplifierNode(Node):
         self.watchdog.periods = float(periods)
         self.deadline.timeout_s = self.watchdog.timeout_s
 
+    @property
+    def limits(self) -> HvLimits:
+        """The voltage limits in force."""
+        return self.core.limits
+
+    @limits.setter
+    def limits(self, limits: HvLimits) -> None:
+        self.core.limits = limits
+
+    @property
+    def watchdog(self) -> Watchdog:
+        """The command watchdog."""
+        return self.core.watchdog
+
+    @property
+    def output_kv(self) -> float:
+        """The last applied command, kV."""
+        return self.core.output_kv
+
+    @property
+    def tripped(self) -> bool:
+        """True while the watchdog holds 0 kV."""
+        return self.core.tripped
+
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _publish(self, stamp, requested: float, applied: float, reason: int) -> None:
+    def _publish(self, stamp, result: tuple[Applied, Notice | None]) -> None:
+        out, notice = result
         msg = self._applied  # one message object, refilled: publish() copies it at once
-        msg.requested_kv, msg.applied_kv, msg.clamped, msg.reason = requested, applied, reason != Reason.NONE, reason
+        msg.requested_kv, msg.applied_kv, msg.clamped, msg.reason = (out.requested_kv, out.applied_kv, out.clamped,
+                                                                     out.reason)
         msg.header.stamp = stamp
-        self.output_kv = applied
         self.applied_pub.publish(msg)
-        if reason != self.last_reason and reason not in (Reason.NONE, Reason.PRECONDITION):
-            level = DiagnosticStatus.ERROR if reason in (Reason.WATCHDOG, Reason.NONFINITE) else DiagnosticStatus.WARN
-            self.diag_pub.publish(diagnostic(self, level, f"output limited: {Reason.NAMES[reason]}",
-                                             from_stamp(stamp), requested_kv=requested, applied_kv=applied))
-        self.last_reason = reason
+        self._report(notice)
 
-    def _feed(self) -> None:
-        self.watchdog.feed(self._now())
-        self.deadline.feed()
-        self.tripped = False
+    def _report(self, notice: Notice | None) -> None:
+        if notice is not None:
+            self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, notice.t_s,
+                                             **notice.values))
 
     def on_command(self, msg: VoltageCommand) -> None:
         """A 200 Hz request from the controller: limit it and pass it on with its stamp."""
-        self._feed()
-        out = self.limits.apply(msg.requested_kv)
-        self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
+        self.deadline.feed()
+        self._publish(msg.header.stamp, self.core.command(self._now(), msg.requested_kv))
 
     def on_batch(self, msg: SampleBatch) -> None:
         """An open-loop 10 kHz request: every sample limited (NaN/inf -> 0 kV)."""
-        self._feed()
-        req = np.asarray(msg.voltage_kv, dtype=float)
-        applied = np.clip(np.nan_to_num(req, nan=0.0, posinf=0.0, neginf=0.0),
-                          self.limits.v_min_kv, self.limits.v_max_kv)
-        out = SampleBatch(header=msg.header, sample_period_s=msg.sample_period_s, voltage_kv=applied.tolist())
-        self.batch_pub.publish(out)
-        n_limited = int(np.count_nonzero(applied != req))
-        if n_limited:
-            self.diag_pub.publish(diagnostic(self, DiagnosticStatus.WARN, "batch samples limited",
-                                             from_stamp(msg.header.stamp), samples=n_limited,
-                                             max_requested_kv=float(np.nanmax(np.where(np.isfinite(req), req, 0)))))
-        self.output_kv = float(applied[-1]) if applied.size else 0.0
+        self.deadline.feed()
+        applied, notice = self.core.batch(self._now(), msg.voltage_kv)
+        self.batch_pub.publish(SampleBatch(header=msg.header, sample_period_s=msg.sample_period_s,
+                                           voltage_kv=float64_array(applied)))
+        self._report(notice)
 
     def on_precondition(self, msg: VoltageCommand) -> None:
         """The deliberate charge reversal (bounded to [-2, 0] kV)."""
-        self._feed()
-        out = HvLimits.precondition(msg.requested_kv)
-        self._publish(msg.header.stamp, out.requested_kv, out.applied_kv, out.reason)
+        self.deadline.feed()
+        self._publish(msg.header.stamp, self.core.precondition(self._now(), msg.requested_kv))
 
     def on_watchdog(self) -> None:
         """Once commands have stopped for too long: command 0 kV, then again every period."""
         now = self._now()
-        if self.watchdog.last_s is None or not self.watchdog.expired(now):
-            return
-        self.tripped = True
-        self._publish(to_stamp(now), float("nan"), 0.0, Reason.WATCHDOG)
+        result = self.core.poll(now)
+        if result is not None:
+            self._publish(to_stamp(now), result)
 
     def on_shutdown(self) -> None:
         """Leave the actuator at 0 kV."""
         try:
-            self._publish(to_stamp(self._now()), float("nan"), 0.0, Reason.SHUTDOWN)
+            now = self._now()
+            self._publish(to_stamp(now), self.core.shutdown(now))
         except Exception:  # noqa: BLE001 - the context may already be gone at exit
             pass
 

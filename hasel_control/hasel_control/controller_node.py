@@ -12,29 +12,28 @@ References arrive on ``/reference`` stamped with the time they take effect, so a
 sequence can be published ahead of time and still be applied at exactly the right
 tick (deterministic in simulated time).
 
-Faults (see FAULTS.md): a sample that fails the plausibility gate (non-finite, out of
-range, or a single-sample spike; :class:`hasel.faults.PlausibilityGate`) is counted
-and skipped: the last command is held for that tick. No valid sample for
-``stale_periods`` periods, or a stuck sensor (feedback frozen while the command
-moves; :class:`hasel.faults.StuckDetector`), holds the integrator, sends no command
-(the amplifier's watchdog then drives 0 kV within three periods) and reports a
-diagnostic ERROR; when valid, moving samples return, control resumes from the held
-integrator without a derivative kick.
+Faults (see FAULTS.md), all decided by :class:`hasel.controller.ControllerCore`: a
+sample that fails the plausibility gate is counted and skipped, the last command held
+for that tick; no valid sample for ``stale_periods`` periods, or a stuck sensor,
+holds the integrator, sends no command (the amplifier's watchdog then drives 0 kV
+within three periods) and reports a diagnostic ERROR; when valid, moving samples
+return, control resumes from the held integrator without a derivative kick. This
+node only translates: message -> one core call -> publish.
 """
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Sequence
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from hasel import paper
-from hasel.faults import PlausibilityGate, StuckDetector
+from hasel.controller import ControllerCore, ControlStep
+from hasel.faults import OK, Notice, PlausibilityGate, StuckDetector
 from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
-from hasel_ros.rosutil import (Deadline, declare, diagnostic, from_stamp, run_node, to_stamp, topic_qos,
-                                  validate_with)
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, run_node, stamp_ns, to_stamp, topic_qos,
+                               validate_with)
 from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
 
 __all__ = ["PidControllerNode", "main", "FEEDBACK_TOPICS"]
@@ -67,15 +66,10 @@ class PidControllerNode(Node):
         max_step = declare(self, "gate_max_step_mm", 1.5, "largest plausible change per period, mm", lo=0.01, hi=100.0)
         self.gate = PlausibilityGate(max_step_mm=max_step)
         self.stuck = StuckDetector()
-        self.stuck_value: float | None = None
-        self.last_output_kv = 0.0
         self.pid = DualModePid(self._config(g, period, v_min, v_max, aw))
         self.add_on_set_parameters_callback(validate_with(self._on_params))
 
-        self.references: list[tuple[float, float]] = []  # (effective time s, stroke mm), sorted
-        self.last_feedback_s: float | None = None
-        self.stale = False
-        self.rejected = 0
+        self.core = ControllerCore(self.pid, self.gate, self.stuck, self.stale_periods)
         self.cmd_pub = self.create_publisher(VoltageCommand, "amp/command", topic_qos("/amp/command"))
         self._cmd = VoltageCommand(applied_kv=math.nan, clamped=False)
         self.state_pub = self.create_publisher(ControllerState, "controller/state", topic_qos("/controller/state"))
@@ -103,87 +97,64 @@ class PidControllerNode(Node):
                                  new.get("v_max_kv", cfg.v_max_kv), new.get("anti_windup", cfg.anti_windup))
         self.pid.config = candidate
 
+    @property
+    def references(self):
+        """The reference schedule (its length is the number of references received)."""
+        return self.core.references
+
+    @property
+    def stale(self) -> bool:
+        """True while the feedback is stale or the sensor stuck (no commands sent)."""
+        return self.core.stale
+
     def reference_at(self, t_s: float) -> float:
-        """The reference (mm) in effect at ``t_s``; NaN before the first one."""
-        i = bisect.bisect_right(self.references, (t_s, math.inf)) - 1
-        return self.references[i][1] if i >= 0 else math.nan
+        """The reference (mm) in effect at ``t_s`` seconds; NaN before the first one."""
+        return self.core.references(t_s)
 
     def on_reference(self, msg: Reference) -> None:
         """Schedule a reference at its stamp (a later message for the same time replaces it)."""
-        t = from_stamp(msg.header.stamp)
-        item = (t, float(msg.stroke_mm))
-        i = bisect.bisect_left(self.references, (t, -math.inf))
-        if i < len(self.references) and self.references[i][0] == t:
-            self.references[i] = item
-        else:
-            self.references.insert(i, item)
+        self.core.references.set(stamp_ns(msg.header.stamp), msg.stroke_mm)
 
     def on_feedback(self, msg: Stroke) -> None:
         """One control update for one feedback sample."""
-        t = from_stamp(msg.header.stamp)
-        z = msg.stroke_mm
-        r = self.reference_at(t)
-        if self.stuck_value is not None:
-            if z == self.stuck_value:
-                return  # still frozen: stay in the fault, send nothing
-            self.stuck_value = None
-            self.stuck.reset()
-        if not self.gate.accept(z):
-            self.rejected = self.gate.rejected
-            if not self.stale:  # hold the last command for this tick; the integrator does not move
-                self._publish_command(msg.header.stamp, self.last_output_kv)
+        step = self.core.on_sample(stamp_ns(msg.header.stamp), msg.stroke_mm)
+        if step.fresh:
+            self.deadline.feed()
+        for notice in step.notices:
+            self._report(notice)
+        if step.command_kv is None:
             return
-        self.last_feedback_s = t
-        self.deadline.feed()
-        if self.stale:
-            self._set_stale(False, t, "feedback back")
-        if self.stuck.update(z, self.last_output_kv):
-            self.stuck_value = z
-            self._set_stale(True, t, "sensor stuck: no change while the command moved")
-            return
-        if not math.isfinite(r):
-            # nothing to track yet: command 0 kV (alive, so the amplifier's watchdog stays calm)
-            self._publish_command(msg.header.stamp, 0.0)
-            return
-        out = self.pid.update(r, z)
-        self._publish_command(msg.header.stamp, out.output_kv)
-        if not self.state_pub.get_subscription_count():
-            return  # nobody records the state: a publish costs about 9 us even so
+        cmd = self._cmd  # one message object, refilled: publish() copies it at once
+        cmd.requested_kv = step.command_kv
+        cmd.header.stamp = msg.header.stamp
+        self.cmd_pub.publish(cmd)
+        if step.pid is not None and self.state_pub.get_subscription_count():
+            self._publish_state(step, msg)  # nobody records the state: a publish costs about 9 us even so
+
+    def _publish_state(self, step: ControlStep, msg: Stroke) -> None:
+        out = step.pid
         st = self._state  # one message object, refilled: publish() copies it at once
-        st.reference_mm, st.measured_mm, st.error_mm, st.mode = r, z, out.error_mm, out.mode
+        st.reference_mm, st.measured_mm, st.error_mm, st.mode = step.reference_mm, msg.stroke_mm, out.error_mm, out.mode
         st.p_term_kv, st.i_term_kv, st.d_term_kv, st.output_kv = out.p_kv, out.i_kv, out.d_kv, out.output_kv
-        st.saturated, st.rejected_samples = out.saturated, self.rejected
+        st.saturated, st.rejected_samples = out.saturated, self.core.rejected
         st.header.stamp = msg.header.stamp
         self.state_pub.publish(st)
 
-    def _publish_command(self, stamp, kv: float) -> None:
-        self.last_output_kv = kv
-        cmd = self._cmd  # one message object, refilled: publish() copies it at once
-        cmd.requested_kv = kv
-        cmd.header.stamp = stamp
-        self.cmd_pub.publish(cmd)
-
     def on_watch(self) -> None:
         """Declare the feedback stale when it is older than ``stale_periods`` periods."""
-        now = self.get_clock().now().nanoseconds * 1e-9
-        if self.last_feedback_s is None:
-            return
-        if now - self.last_feedback_s > self.stale_periods * self.pid.config.period_s + 1e-9:
-            self._set_stale(True, now, "no valid feedback")
+        notice = self.core.poll(self.get_clock().now().nanoseconds)
+        if notice is not None:
+            self._report(notice)
 
-    def _set_stale(self, stale: bool, t_s: float, why: str) -> None:
-        if stale == self.stale:
-            return
-        self.stale = stale
-        if stale:
-            self.pid.hold()
-        level = DiagnosticStatus.ERROR if stale else DiagnosticStatus.OK
-        self.diag_pub.publish(diagnostic(self, level, f"feedback {'stale' if stale else 'ok'}: {why}", t_s,
-                                         integrator_kv=self.pid.i_kv, feedback=self.feedback))
-        st = ControllerState(reference_mm=self.reference_at(t_s), measured_mm=math.nan, error_mm=math.nan,
-                             mode=self.pid.mode, i_term_kv=self.pid.i_kv, output_kv=0.0, input_stale=stale,
-                             rejected_samples=self.rejected)
-        st.header.stamp = to_stamp(t_s)
+    def _report(self, notice: Notice) -> None:
+        """A stale/ok transition: diagnostic and a ControllerState saying so."""
+        self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, notice.t_s,
+                                         **notice.values, feedback=self.feedback))
+        core = self.core
+        st = ControllerState(reference_mm=self.reference_at(notice.t_s), measured_mm=math.nan, error_mm=math.nan,
+                             mode=core.pid.mode, i_term_kv=core.pid.i_kv, output_kv=0.0, input_stale=notice.level != OK,
+                             rejected_samples=core.rejected)
+        st.header.stamp = to_stamp(notice.t_s)
         self.state_pub.publish(st)
 
 

@@ -4,17 +4,17 @@ Subscribes ``/sensor/timing`` (hasel_msgs/SensorTiming), publishes ``/strain/str
 (hasel_msgs/Stroke, source STRAIN) with the reading's own stamp. The calibration is
 a YAML file written by ``hasel calibrate`` (parameter ``calibration_file``) or, when
 that is empty, the line ``slope_mm_per_us`` / ``offset_mm``. A non-finite or
-non-positive elapsed time gives a NaN stroke, which the controller treats as missing.
+non-positive elapsed time gives a NaN stroke, which the controller treats as missing
+(the decision is :class:`hasel.channels.StrainChannel`'s).
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from rclpy.node import Node
 
 from hasel.calibration import Calibration
-from hasel.loop import default_calibration
+from hasel.channels import StrainChannel, default_calibration
 from hasel_ros.rosutil import declare, run_node, topic_qos, validate_with
 from hasel_msgs.msg import SensorTiming, Stroke
 
@@ -48,12 +48,19 @@ class StrainDriverNode(Node):
             offset = new.get("offset_mm", self.calibration.offset_mm)
             self.calibration = Calibration.line(slope, offset, "parameters")
 
+    @property
+    def calibration(self) -> Calibration:
+        """The calibration in use (elapsed time us -> stroke mm)."""
+        return self.channel.calibration
+
+    @calibration.setter
+    def calibration(self, cal: Calibration) -> None:
+        self.channel = StrainChannel(cal)
+
     def on_timing(self, msg: SensorTiming) -> None:
         """Convert one reading; the output keeps the reading's stamp."""
-        us = msg.elapsed_us
-        z = float(self.calibration(us)) if math.isfinite(us) and us > 0.0 else math.nan
         out = self._out  # one message object, refilled: publish() copies it at once
-        out.stroke_mm = z
+        out.stroke_mm = self.channel(msg.elapsed_us)
         out.header = msg.header
         self.pub.publish(out)
 

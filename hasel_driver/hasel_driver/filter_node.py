@@ -5,17 +5,16 @@ cut-off pre-warped, so the -3 dB point is exactly ``cutoff_hz`` at ``rate_hz``
 (40 Hz at 200 Hz by default); unity DC gain. Subscribes ``/strain/stroke``,
 publishes ``/strain/stroke_filtered`` with the input's stamp. A non-finite sample is
 passed on as NaN without entering the filter, so one bad reading cannot poison the
-filter's state.
+filter's state (the decision is :class:`hasel.channels.FilterChannel`'s).
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from rclpy.node import Node
 
 from hasel import paper
-from hasel.filters import LowPass
+from hasel.channels import FilterChannel
 from hasel_ros.rosutil import declare, run_node, topic_qos
 from hasel_msgs.msg import Stroke
 
@@ -33,16 +32,15 @@ class LowPassNode(Node):
                        hi=10000.0, read_only=True)
         in_topic = declare(self, "input_topic", "strain/stroke", "stroke to filter")
         out_topic = declare(self, "output_topic", "strain/stroke_filtered", "filtered stroke")
-        self.filter = LowPass(cutoff, rate)
+        self.channel = FilterChannel(cutoff, rate)
         self.pub = self.create_publisher(Stroke, out_topic, topic_qos("/strain/stroke_filtered"))
         self._out = Stroke(source=Stroke.SOURCE_STRAIN_FILTERED)
         self.sub = self.create_subscription(Stroke, in_topic, self.on_stroke, topic_qos("/strain/stroke"))
 
     def on_stroke(self, msg: Stroke) -> None:
         """Filter one sample; the output keeps its stamp."""
-        z = self.filter(msg.stroke_mm) if math.isfinite(msg.stroke_mm) else math.nan
         out = self._out  # one message object, refilled: publish() copies it at once
-        out.stroke_mm = z
+        out.stroke_mm = self.channel(msg.stroke_mm)
         out.header = msg.header
         self.pub.publish(out)
 

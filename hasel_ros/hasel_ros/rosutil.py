@@ -23,7 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from hasel.topics import QosSpec, topic
 
-__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "declare", "diagnostic", "run_node",
+__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "stamp_ns", "declare", "diagnostic", "run_node",
            "validate_with", "float64_array", "Deadline"]
 
 
@@ -64,6 +64,11 @@ def to_stamp(t_s: float) -> Time:
 def from_stamp(stamp: Time) -> float:
     """builtin_interfaces/Time -> seconds (float)."""
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_ns(stamp: Time) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds (exact: what the core's decisions compare)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def float64_array(values) -> array.array:

@@ -22,7 +22,6 @@ Plant variants are pluggable (parameter ``variant``): see :func:`make_actuator`.
 """
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 
@@ -34,6 +33,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel import plantspec
+from hasel.amplifier import HeldOutput
 from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
@@ -81,8 +81,7 @@ class PlantNode(Node):
         self.get_logger().info(f"plant: {plantspec.describe(act)}")
         self.period_ns = int(round(period * 1e9))
         self.trigger_period_us = 1e6 / self.sim.strain.config.trigger_hz
-        self.command: float | np.ndarray = 0.0
-        self.missed = 0
+        self.held = HeldOutput(3)  # the DAC holds; the MCU's own watchdog zeroes after 3 missed periods
         self.running = False
         self.done = False
         self.sequence = 0
@@ -167,10 +166,8 @@ class PlantNode(Node):
         self._on_command(msg.header.stamp, cmd)
 
     def _on_command(self, stamp, command) -> None:
-        cmd = np.where(np.isfinite(command), command, 0.0) if np.ndim(command) else \
-            (command if math.isfinite(command) else 0.0)
         if self.clock_mode == "wall":
-            self.command = cmd
+            self.held.fresh(command)
             ns = stamp.sec * 1_000_000_000 + stamp.nanosec
             if ns == self._wall_tick_ns:  # the answer to the latest tick: loop latency
                 self.latencies_ns.append(self.get_clock().now().nanoseconds - ns)
@@ -179,9 +176,7 @@ class PlantNode(Node):
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if not self.running or self.done or ns != self.tick_stamp_ns():
             return  # not for this tick (late, duplicate or early): ignore
-        self.command = cmd
-        self.missed = 0
-        self._advance()
+        self._advance(self.held.fresh(command))
 
     def on_lockstep_watch(self) -> None:
         """Wall-time guard of lockstep: step anyway if the amplifier has gone quiet."""
@@ -189,13 +184,10 @@ class PlantNode(Node):
             return
         if time.monotonic() - self._last_progress < self.lockstep_timeout_s:
             return
-        self.missed += 1
-        if self.missed > 3:
-            self.command = 0.0  # the MCU's own watchdog: no command for three periods
-        self._advance()
+        self._advance(self.held.missing())
 
-    def _advance(self) -> None:
-        block = self.sim.step(self.command)
+    def _advance(self, command_kv: float | np.ndarray) -> None:
+        block = self.sim.step(command_kv)
         self._last_progress = time.monotonic()
         if self.publish_batch and self.batch_pub.get_subscription_count():  # nobody listening: skip the work
             self._publish_batch(block)
@@ -246,7 +238,7 @@ class PlantNode(Node):
                 self.skipped_periods += index - self._tick_index - 1
                 self.skipped_at_ns.append(wake)
             self._tick_index = max(index, self._tick_index + 1)
-        block = self.sim.step(self.command)
+        block = self.sim.step(self.held.value)
         if self.publish_batch and self.batch_pub.get_subscription_count():
             self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
         now = self.get_clock().now().nanoseconds

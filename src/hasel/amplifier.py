@@ -14,17 +14,26 @@ The paper's charge-reversal pre-conditioning (-1 kV held before each test) is a
 separate, deliberate request (:meth:`HvLimits.precondition`), bounded to
 ``[PRECONDITION_MIN_KV, 0]``; the controller's path can never produce it because
 ``v_min_kv`` cannot be negative.
+
+:class:`AmplifierCore` is the amplifier node's decisions (limits, watchdog, the
+diagnostics they raise); :class:`HeldOutput` is what the actuator gets in a period
+without a fresh command (the DAC holds, the MCU's own watchdog zeroes). The nodes and
+the offline loop (:mod:`hasel.loop`) use the same objects.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from hasel import paper
 from hasel.errors import BadInputError, UnsafeParameterError
+from hasel.faults import ERROR, WARN, Notice
 from hasel.validate import finite, positive
 
-__all__ = ["HARD_CEILING_KV", "PRECONDITION_MIN_KV", "Reason", "HvLimits", "Applied", "Watchdog"]
+__all__ = ["HARD_CEILING_KV", "PRECONDITION_MIN_KV", "Reason", "HvLimits", "Applied", "Watchdog",
+           "AmplifierCore", "HeldOutput"]
 
 HARD_CEILING_KV = paper.V_MAX_KV
 PRECONDITION_MIN_KV = -2.0
@@ -110,6 +119,12 @@ class HvLimits:
             return Applied(req, self.v_min_kv, Reason.CLAMP_LOW)
         return Applied(req, req, Reason.NONE)
 
+    def apply_many(self, requested_kv) -> tuple[np.ndarray, np.ndarray]:
+        """Limit a waveform (kV) sample by sample with :meth:`apply`: (applied kV, reasons)."""
+        out = [self.apply(x) for x in np.asarray(requested_kv, dtype=float).tolist()]
+        return (np.array([a.applied_kv for a in out], dtype=float),
+                np.array([a.reason for a in out], dtype=np.int64))
+
     @staticmethod
     def precondition(requested_kv: float) -> Applied:
         """The deliberate charge-reversal command (paper: -1 kV), kept in [-2, 0] kV."""
@@ -146,3 +161,97 @@ class Watchdog:
         age = now_s - self.last_s
         # a clock that jumps backwards makes the command's age meaningless: stale
         return age > self.timeout_s + 1e-9 or age < -self.period_s
+
+
+class AmplifierCore:
+    """The amplifier node's decisions: limits, watchdog and the diagnostics they raise.
+
+    Every method takes the time ``now_s`` (s, the node's clock) and returns what to
+    publish: the :class:`Applied` command and a :class:`~hasel.faults.Notice` when the
+    reason changed to a limiting one (WARN for a clamp, ERROR for a non-finite request
+    or the watchdog), else None.
+    """
+
+    def __init__(self, limits: HvLimits | None = None, watchdog: Watchdog | None = None) -> None:
+        self.limits = limits or HvLimits()
+        self.watchdog = watchdog or Watchdog()
+        self.output_kv = 0.0
+        self.last_reason = Reason.NONE
+        self.tripped = False
+
+    def _feed(self, now_s: float) -> None:
+        self.watchdog.feed(now_s)
+        self.tripped = False
+
+    def _out(self, applied: Applied, now_s: float) -> tuple[Applied, Notice | None]:
+        self.output_kv = applied.applied_kv
+        reason, notice = applied.reason, None
+        if reason != self.last_reason and reason not in (Reason.NONE, Reason.PRECONDITION):
+            level = ERROR if reason in (Reason.WATCHDOG, Reason.NONFINITE) else WARN
+            notice = Notice(level, f"output limited: {Reason.NAMES[reason]}", now_s,
+                            {"requested_kv": applied.requested_kv, "applied_kv": applied.applied_kv})
+        self.last_reason = reason
+        return applied, notice
+
+    def command(self, now_s: float, requested_kv: float) -> tuple[Applied, Notice | None]:
+        """A request from the controller (kV): limited, and the watchdog fed."""
+        self._feed(now_s)
+        return self._out(self.limits.apply(requested_kv), now_s)
+
+    def precondition(self, now_s: float, requested_kv: float) -> tuple[Applied, Notice | None]:
+        """The deliberate charge reversal (kV), bounded to [-2, 0] kV; feeds the watchdog."""
+        self._feed(now_s)
+        return self._out(HvLimits.precondition(requested_kv), now_s)
+
+    def batch(self, now_s: float, requested_kv) -> tuple[np.ndarray, Notice | None]:
+        """An open-loop waveform (kV): every sample limited; a WARN notice when any was."""
+        self._feed(now_s)
+        req = np.asarray(requested_kv, dtype=float)
+        applied, reasons = self.limits.apply_many(req)
+        n_limited = int(np.count_nonzero(reasons != Reason.NONE))
+        self.output_kv = float(applied[-1]) if applied.size else 0.0
+        if not n_limited:
+            return applied, None
+        return applied, Notice(WARN, "batch samples limited", now_s,
+                               {"samples": n_limited,
+                                "max_requested_kv": float(np.nanmax(np.where(np.isfinite(req), req, 0)))})
+
+    def poll(self, now_s: float) -> tuple[Applied, Notice | None] | None:
+        """The watchdog at ``now_s``: 0 kV (``WATCHDOG``) once commands are stale, else None."""
+        if self.watchdog.last_s is None or not self.watchdog.expired(now_s):
+            return None
+        self.tripped = True
+        return self._out(Applied(math.nan, 0.0, Reason.WATCHDOG), now_s)
+
+    def shutdown(self, now_s: float) -> tuple[Applied, Notice | None]:
+        """0 kV on the way out (``SHUTDOWN``)."""
+        return self._out(Applied(math.nan, 0.0, Reason.SHUTDOWN), now_s)
+
+
+class HeldOutput:
+    """What the actuator gets in a loop period (kV) with or without a fresh amplifier command.
+
+    The DAC holds the last value; after more than ``periods`` periods without a fresh
+    one the MCU's own watchdog applies 0 kV. A non-finite command applies 0 kV.
+    """
+
+    def __init__(self, periods: int = 3) -> None:
+        self.periods = int(periods)
+        self.value: float | np.ndarray = 0.0
+        self.missed = 0
+
+    def fresh(self, command_kv: float | np.ndarray) -> float | np.ndarray:
+        """A command for this period (one value, or a waveform): what is applied, kV."""
+        if np.ndim(command_kv):
+            self.value = np.where(np.isfinite(command_kv), command_kv, 0.0)
+        else:
+            self.value = command_kv if math.isfinite(command_kv) else 0.0
+        self.missed = 0
+        return self.value
+
+    def missing(self) -> float | np.ndarray:
+        """No command arrived for this period: what is applied, kV."""
+        self.missed += 1
+        if self.missed > self.periods:
+            self.value = 0.0
+        return self.value

@@ -11,15 +11,33 @@ stroke rate of the paper's closed loop.
 Stuck sensor: if the command moved by at least ``min_command_change_kv`` over a window
 while the feedback did not change at all, the sensor is not seeing the actuator
 (a frozen driver, a shorted 555, a laser out of range).
+
+A :class:`Notice` is what a core object asks its node to report on ``/diagnostics``
+(the node only translates it into a ``diagnostic_msgs/DiagnosticStatus``).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass, field
 
 from hasel.validate import positive
 
-__all__ = ["PlausibilityGate", "StuckDetector"]
+__all__ = ["PlausibilityGate", "StuckDetector", "Notice", "OK", "WARN", "ERROR"]
+
+# levels of a Notice: the values of diagnostic_msgs/DiagnosticStatus.level
+OK, WARN, ERROR = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class Notice:
+    """A diagnostic to report: ``level`` (:data:`OK`, :data:`WARN`, :data:`ERROR`), a message,
+    key values (floats in the units their names say), at ``t_s`` seconds."""
+
+    level: int
+    message: str
+    t_s: float
+    values: dict = field(default_factory=dict)
 
 
 class PlausibilityGate:
