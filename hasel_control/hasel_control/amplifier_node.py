@@ -108,8 +108,12 @@ class HvAmplifierNode(Node):
 
     def on_command(self, msg: VoltageCommand) -> None:
         """A 200 Hz request from the controller: limit it and pass it on with its stamp."""
+        now = self._now()
+        results = self.core.command(now, msg.requested_kv)
         self.deadline.feed()
-        self._publish(msg.header.stamp, self.core.command(self._now(), msg.requested_kv))
+        if len(results) > 1:  # the watchdog's 0 kV fell due at this instant: it goes first
+            self._publish(to_stamp(now), results[0])
+        self._publish(msg.header.stamp, results[-1])
 
     def on_batch(self, msg: SampleBatch) -> None:
         """An open-loop 10 kHz request: every sample limited (NaN/inf -> 0 kV)."""

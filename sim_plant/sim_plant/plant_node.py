@@ -15,7 +15,11 @@ Clock modes (parameter ``clock_mode``):
   period. The whole graph is deterministic and runs as fast as the machine allows.
   If no output arrives within ``lockstep_timeout_s`` of wall time the plant steps
   anyway, holding the last command as a DAC would, and after three missed periods
-  it models the MCU's own watchdog by applying 0 kV.
+  it models the MCU's own watchdog by applying 0 kV. An output of the amplifier's
+  watchdog answers a tick at the instant the clock moves, ahead of that tick's
+  messages still on their way through the graph; the plant lets them land (a few
+  ms of wall time) before stepping on it, so the graph never runs ahead of its own
+  controller and stays deterministic.
 - ``wall``: a steady timer steps the plant in real time with the latest command.
 
 Plant variants are pluggable (parameter ``variant``): see :func:`make_actuator`.
@@ -33,7 +37,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel import plantspec
-from hasel.amplifier import HeldOutput
+from hasel.amplifier import HeldOutput, Reason
 from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
@@ -41,6 +45,10 @@ from hasel_ros.rosutil import declare, float64_array, run_node, topic_qos
 from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["PlantNode", "main", "make_actuator"]
+
+# wall time the tick's messages get to land after the amplifier's watchdog answered it, s
+# (a hop costs tens of microseconds; this leaves room for a busy machine)
+_SETTLE_S = 0.01
 
 def make_actuator(variant: str) -> Actuator:
     """The actuator model of a variant: ``nominal``, ``truth``, or ``truth:EFFECT(p=v)+...``
@@ -82,6 +90,7 @@ class PlantNode(Node):
         self.period_ns = int(round(period * 1e9))
         self.trigger_period_us = 1e6 / self.sim.strain.config.trigger_hz
         self.held = HeldOutput(3)  # the DAC holds; the MCU's own watchdog zeroes after 3 missed periods
+        self._watchdog_answer: float | None = None  # an amplifier-watchdog output waiting for the tick to settle
         self.running = False
         self.done = False
         self.sequence = 0
@@ -108,6 +117,9 @@ class PlantNode(Node):
             self.create_timer(period, self.on_wall_tick, clock=steady)
         else:
             self.create_timer(min(self.lockstep_timeout_s / 2, 0.05), self.on_lockstep_watch, clock=steady)
+            self._settle = self.create_timer(min(self.lockstep_timeout_s / 2, _SETTLE_S), self._on_settled,
+                                             clock=steady)
+            self._settle.cancel()
             if autostart:
                 self._autostart = self.create_timer(1.0, self._start_once, clock=steady)
 
@@ -155,7 +167,7 @@ class PlantNode(Node):
 
     def on_applied(self, msg: VoltageCommand) -> None:
         """The amplifier's output for one tick (held for one period)."""
-        self._on_command(msg.header.stamp, msg.applied_kv)
+        self._on_command(msg.header.stamp, msg.applied_kv, msg.reason == Reason.WATCHDOG)
 
     def on_applied_batch(self, msg: SampleBatch) -> None:
         """The amplifier's output as a 10 kHz waveform for one period."""
@@ -165,7 +177,7 @@ class PlantNode(Node):
             return
         self._on_command(msg.header.stamp, cmd)
 
-    def _on_command(self, stamp, command) -> None:
+    def _on_command(self, stamp, command, watchdog: bool = False) -> None:
         if self.clock_mode == "wall":
             self.held.fresh(command)
             ns = stamp.sec * 1_000_000_000 + stamp.nanosec
@@ -174,13 +186,24 @@ class PlantNode(Node):
                 self._answered = True
             return
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        if not self.running or self.done or ns != self.tick_stamp_ns():
-            return  # not for this tick (late, duplicate or early): ignore
+        if not self.running or self.done or ns != self.tick_stamp_ns() or self._watchdog_answer is not None:
+            return  # not for this tick (late, duplicate, early, or after its first answer): ignore
+        if watchdog:  # the tick's first answer, but its messages may still be in flight: step once they land
+            self._watchdog_answer = command
+            self._settle.reset()
+            return
         self._advance(self.held.fresh(command))
+
+    def _on_settled(self) -> None:
+        """Step on the amplifier watchdog's answer once the tick's messages have landed."""
+        self._settle.cancel()
+        command, self._watchdog_answer = self._watchdog_answer, None
+        if command is not None and self.running and not self.done:
+            self._advance(self.held.fresh(command))
 
     def on_lockstep_watch(self) -> None:
         """Wall-time guard of lockstep: step anyway if the amplifier has gone quiet."""
-        if not self.running or self.done:
+        if not self.running or self.done or self._watchdog_answer is not None:
             return
         if time.monotonic() - self._last_progress < self.lockstep_timeout_s:
             return

@@ -178,6 +178,7 @@ class AmplifierCore:
         self.output_kv = 0.0
         self.last_reason = Reason.NONE
         self.tripped = False
+        self._tripped_at_s: float | None = None
 
     def _feed(self, now_s: float) -> None:
         self.watchdog.feed(now_s)
@@ -193,10 +194,18 @@ class AmplifierCore:
         self.last_reason = reason
         return applied, notice
 
-    def command(self, now_s: float, requested_kv: float) -> tuple[Applied, Notice | None]:
-        """A request from the controller (kV): limited, and the watchdog fed."""
+    def command(self, now_s: float, requested_kv: float) -> tuple[tuple[Applied, Notice | None], ...]:
+        """A request from the controller (kV): limited, and the watchdog fed.
+
+        Returns the outputs to publish in order: the request's, preceded by the
+        watchdog's 0 kV when that fell due at ``now_s`` and the node's watchdog timer has
+        not yet sent it (so the first output of an instant never depends on whether the
+        timer or the request is handled first).
+        """
+        due = self.poll(now_s)
         self._feed(now_s)
-        return self._out(self.limits.apply(requested_kv), now_s)
+        out = self._out(self.limits.apply(requested_kv), now_s)
+        return (out,) if due is None else (due, out)
 
     def precondition(self, now_s: float, requested_kv: float) -> tuple[Applied, Notice | None]:
         """The deliberate charge reversal (kV), bounded to [-2, 0] kV; feeds the watchdog."""
@@ -218,9 +227,9 @@ class AmplifierCore:
 
     def poll(self, now_s: float) -> tuple[Applied, Notice | None] | None:
         """The watchdog at ``now_s``: 0 kV (``WATCHDOG``) once commands are stale, else None."""
-        if self.watchdog.last_s is None or not self.watchdog.expired(now_s):
-            return None
-        self.tripped = True
+        if self.watchdog.last_s is None or not self.watchdog.expired(now_s) or now_s == self._tripped_at_s:
+            return None  # fresh, never fed, or this instant's 0 kV already sent
+        self.tripped, self._tripped_at_s = True, now_s
         return self._out(Applied(math.nan, 0.0, Reason.WATCHDOG), now_s)
 
     def shutdown(self, now_s: float) -> tuple[Applied, Notice | None]:

@@ -118,18 +118,25 @@ class ControllerCore:
         return int(round(self.stale_periods * self.pid.config.period_s * 1e9))
 
     def on_sample(self, t_ns: int, z_mm: float) -> ControlStep:
-        """One feedback sample ``z_mm`` (mm) measured at ``t_ns`` (ns) -> what to command."""
+        """One feedback sample ``z_mm`` (mm) measured at ``t_ns`` (ns) -> what to command.
+
+        The stale check runs first at ``t_ns``, so the outcome does not depend on whether
+        the node's deadline timer or the sample of the same instant is handled first.
+        """
         r = self.references.at(t_ns)
+        late = self.poll(t_ns)
+        notices = () if late is None else (late,)
         if self.stuck_value is not None:
             if z_mm == self.stuck_value:
-                return ControlStep(None, r, None, False)  # still frozen: stay in the fault
+                return ControlStep(None, r, None, False, notices)  # still frozen: stay in the fault
             self.stuck_value = None
             self.stuck.reset()
         if not self.gate.accept(z_mm):
             # hold the last command for this tick (nothing while stale); the integrator does not move
-            return ControlStep(None if self.stale else self.last_output_kv, r, None, False)
+            return ControlStep(None if self.stale else self.last_output_kv, r, None, False, notices)
         self.last_fresh_ns = t_ns
-        notices = (self._set_stale(False, t_ns, "feedback back"),) if self.stale else ()
+        if self.stale:
+            notices += (self._set_stale(False, t_ns, "feedback back"),)
         if self.stuck.update(z_mm, self.last_output_kv):
             self.stuck_value = z_mm
             notices += (self._set_stale(True, t_ns, "sensor stuck: no change while the command moved"),)

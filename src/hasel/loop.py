@@ -6,12 +6,12 @@ alike by construction, faults included. Per 200 Hz tick k (t_k = k Ts):
 1. the MCU reads the sensors (laser stroke, 555 elapsed time) at t_k;
 2. the driver maps the elapsed time to mm (:class:`hasel.channels.StrainChannel`);
 3. the 40 Hz low-pass filters that stroke (:class:`hasel.channels.FilterChannel`);
-4. the amplifier's watchdog and the controller's stale check run first, as the
-   nodes' timers do when the clock reaches t_k before the tick's messages;
-5. the controller core (:class:`hasel.controller.ControllerCore`) decides on the
-   feedback (laser, or filtered strain): a command, a held command, or none;
-6. the amplifier core (:class:`hasel.amplifier.AmplifierCore`) limits it (hard 9 kV);
-7. the plant holds the amplifier's first output of the tick over [t_k, t_{k+1}) at
+4. the controller core (:class:`hasel.controller.ControllerCore`) decides on the
+   feedback (laser, or filtered strain): a command, a held command, or none; with no
+   sample, its stale check runs as the node's deadline timer would;
+5. the amplifier core (:class:`hasel.amplifier.AmplifierCore`) limits the request
+   (hard 9 kV), or, with none, runs its watchdog as the node's timer would;
+6. the plant holds the amplifier's first output of the tick over [t_k, t_{k+1}) at
    10 kHz, or, with none, what the DAC holds (:class:`hasel.amplifier.HeldOutput`).
 
 :class:`LoopFaults` injects sensor and link faults (lost or corrupted samples) at
@@ -160,15 +160,15 @@ def run_closed_loop(sim: PlantSimulator, reference: Callable[[float], float], du
         z_filt = nan if us is None else lowpass(z_strain)
         fb = rd.laser_mm if cfg.feedback == "laser" else (None if us is None else z_filt)
         fb = None if fb is None else _inject(flt.feedback, t_s, fb)
-        # the timers first (due when the clock reaches t_k), then the tick's messages
-        first = amp.poll(t_s)
-        ctl.poll(t_ns)
-        step = None if fb is None else ctl.on_sample(t_ns, fb)
-        req = None if step is None else step.command_kv
+        # a message of this tick, or else the deadline timer (the cores decide alike in either order)
+        req = None
+        if fb is None:
+            ctl.poll(t_ns)
+        else:
+            req = ctl.on_sample(t_ns, fb).command_kv
         req = None if req is None else _inject(flt.command, t_s, req)
-        if req is not None:
-            out = amp.command(t_s, req)
-            first = first or out  # a later output for the same tick reaches the plant too late
+        outs = amp.command(t_s, req) if req is not None else (amp.poll(t_s),)
+        first = outs[0]  # the plant steps with the tick's first output; a later one comes too late
         applied = dac.fresh(first[0].applied_kv) if first is not None else dac.missing()
         reason[k] = first[0].reason if first is not None else -1
         stale[k] = ctl.stale
