@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hasel.amplifier import HARD_CEILING_KV, HvLimits, Reason, Watchdog
+from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, HeldOutput, HvLimits, Reason, Watchdog
 from hasel.errors import UnsafeParameterError
+from hasel.faults import ERROR, WARN
 
 
 @settings(max_examples=2000, deadline=None)
@@ -54,3 +56,58 @@ def test_watchdog_three_periods():
     assert not wd.expired(1.015)
     assert wd.expired(1.0151)
     assert wd.expired(0.9)  # clock jumped backwards: stale
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=60), st.floats(0.0, 4.0),
+       st.floats(4.5, 9.0))
+def test_a_waveform_is_limited_sample_by_sample_by_the_same_rule(req, lo, hi):
+    lim = HvLimits(lo, hi)
+    applied, reasons = lim.apply_many(req)
+    assert applied.tolist() == [lim.apply(x).applied_kv for x in req]
+    assert reasons.tolist() == [lim.apply(x).reason for x in req]
+
+
+def test_amplifier_core_reasons_and_diagnostics():
+    amp = AmplifierCore()
+    (ok, note), = amp.command(0.0, 4.0)
+    assert ok.applied_kv == 4.0 and note is None
+    (high, note), = amp.command(0.005, 12.0)
+    assert high.applied_kv == 9.0 and high.reason == Reason.CLAMP_HIGH and note.level == WARN
+    assert amp.command(0.010, 13.0)[0][1] is None  # reported when the reason changes, not every tick
+    (bad, note), = amp.command(0.015, math.nan)
+    assert bad.applied_kv == 0.0 and bad.reason == Reason.NONFINITE and note.level == ERROR
+    (pre, note), = [amp.precondition(0.02, -7.0)]
+    assert pre.applied_kv == -2.0 and pre.reason == Reason.PRECONDITION and note is None
+    down, note = amp.shutdown(0.025)
+    assert down.applied_kv == 0.0 and down.reason == Reason.SHUTDOWN and amp.output_kv == 0.0
+
+
+def test_amplifier_watchdog_zero_kv_once_commands_stop_and_the_first_command_of_the_instant():
+    amp = AmplifierCore(watchdog=Watchdog(0.005, 3))
+    assert amp.poll(0.0) is None  # never fed: nothing to guard yet
+    amp.command(1.000, 5.0)
+    assert amp.poll(1.015) is None  # three periods: still fresh
+    out, note = amp.poll(1.020)
+    assert out.applied_kv == 0.0 and out.reason == Reason.WATCHDOG and note.level == ERROR and amp.tripped
+    assert amp.poll(1.020) is None  # once per instant
+    assert amp.poll(1.025)[0].reason == Reason.WATCHDOG  # then every period
+    # a request at an instant whose 0 kV was not sent yet: the watchdog's output comes first
+    results = amp.command(1.030, 5.0)
+    assert [r[0].reason for r in results] == [Reason.WATCHDOG, Reason.NONE] and not amp.tripped
+
+
+def test_batches_are_limited_with_one_warning():
+    amp = AmplifierCore(HvLimits(0.0, 8.0))
+    applied, note = amp.batch(0.0, [1.0, 9.5, math.nan, -1.0, 7.9])
+    assert applied.tolist() == [1.0, 8.0, 0.0, 0.0, 7.9]
+    assert note.level == WARN and note.values["samples"] == 3 and note.values["max_requested_kv"] == 9.5
+    assert amp.output_kv == 7.9 and amp.batch(0.005, [2.0])[1] is None
+
+
+def test_held_output_holds_three_periods_then_zero():
+    dac = HeldOutput(3)
+    assert dac.fresh(6.0) == 6.0
+    assert [dac.missing() for _ in range(5)] == [6.0, 6.0, 6.0, 0.0, 0.0]
+    assert dac.fresh(math.inf) == 0.0
+    assert dac.fresh(np.array([1.0, math.nan])).tolist() == [1.0, 0.0]
