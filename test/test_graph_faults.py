@@ -16,7 +16,6 @@ import math
 import time
 
 import numpy as np
-import pytest
 from rclpy.parameter import Parameter
 
 from hasel.amplifier import Reason
@@ -139,17 +138,24 @@ def in_ticks(*spans):
     return {k for a, b in spans for k in range(a, b + 1)}
 
 
-def test_nan_bursts_spikes_and_dropout_of_the_feedback_graph_equals_loop():
-    nan_burst, spikes, lost = in_ticks((60, 64)), {80, 95}, in_ticks((110, 129))
+def corrupt(lost=(), nan=(), change=None):
+    """A fault rule by tick: lost messages, NaN values, and ``change[k](value)`` at other ticks."""
+    change = change or {}
 
-    def rule(t, z):
+    def rule(t, value):
         k = tick(t)
         if k in lost:
             return None
-        if k in nan_burst:
+        if k in nan:
             return math.nan
-        return z + 8.0 if k in spikes else z
+        return change[k](value) if k in change else value
 
+    return rule
+
+
+def test_nan_bursts_spikes_and_dropout_of_the_feedback_graph_equals_loop():
+    rule = corrupt(lost=in_ticks((110, 129)), nan=in_ticks((60, 64)),
+                   change={k: (lambda z: z + 8.0) for k in (80, 95)})  # spikes
     ref = compare("laser", LoopFaults(feedback=rule), [2.0, 4.0], 0.3, 0.9, seed=21)
     # the scenario did what it says: samples rejected and held, then stale and 0 kV, then resumed
     held = ref.requested_kv[[60, 61, 62, 80, 95]]  # rejected: the last command held
@@ -163,16 +169,9 @@ def test_nan_bursts_spikes_and_dropout_of_the_feedback_graph_equals_loop():
 
 
 def test_faulty_555_readings_with_strain_feedback_graph_equals_loop():
-    nan_burst, bad, lost = in_ticks((40, 43)), {50: 0.0, 51: -3.0, 70: math.inf}, in_ticks((90, 99))
-
-    def rule(t, us):
-        k = tick(t)
-        if k in lost:
-            return None
-        if k in nan_burst:
-            return math.nan
-        return bad.get(k, us)
-
+    bad = {50: 0.0, 51: -3.0, 70: math.inf}
+    rule = corrupt(lost=in_ticks((90, 99)), nan=in_ticks((40, 43)),
+                   change={k: (lambda _, v=v: v) for k, v in bad.items()})
     ref = compare("strain", LoopFaults(timing=rule), [2.0, 3.0], 0.3, 0.7, seed=5)
     assert np.all(np.isnan(ref.strain_mm[[40, 43, 50, 51, 70]]))
     assert np.all(np.isfinite(ref.filtered_mm[[44, 52, 71]]))  # the filter's state was never poisoned
@@ -193,16 +192,9 @@ def test_stuck_sensor_then_recovery_graph_equals_loop():
 
 
 def test_commands_above_nine_kv_nonfinite_and_lost_graph_equals_loop():
-    def rule(t, kv):
-        k = tick(t)
-        if 60 <= k < 66:
-            return kv + 10.0  # a corrupted request, above 9 kV
-        if k == 70:
-            return math.nan
-        if 80 <= k < 82 or 90 <= k < 100:
-            return None  # lost: the DAC holds, then the amplifier's watchdog
-        return kv
-
+    # requests corrupted above 9 kV, one NaN, and lost ones (the DAC holds, then the amplifier's watchdog)
+    rule = corrupt(lost=in_ticks((80, 81), (90, 99)), nan={70},
+                   change={k: (lambda kv: kv + 10.0) for k in range(60, 66)})
     ref = compare("laser", LoopFaults(command=rule), [2.0, 4.0], 0.25, 0.6, seed=8)
     assert np.all(ref.reason[60:66] == Reason.CLAMP_HIGH) and np.all(ref.command_kv[60:66] == 9.0)
     assert ref.reason[70] == Reason.NONFINITE and ref.command_kv[70] == 0.0

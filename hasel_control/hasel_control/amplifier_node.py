@@ -23,7 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from hasel import paper
-from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Reason, Watchdog
+from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Watchdog
 from hasel.faults import Notice
 from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, run_node, to_stamp, topic_qos,
                                validate_with)
