@@ -62,9 +62,9 @@ class ReferenceSchedule:
         return self.at(int(round(t_s * 1e9)))
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)  # not frozen: built once per 200 Hz sample, where a frozen init costs more
 class ControlStep:
-    """What one feedback sample decided.
+    """What one feedback sample decided (read it, do not change it).
 
     ``command_kv`` is the request for the amplifier, kV (None: send nothing); ``pid``
     the controller update behind it (None when the sample updated no controller:
