@@ -46,9 +46,10 @@ from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["PlantNode", "main", "make_actuator"]
 
-# wall time the tick's messages get to land after the amplifier's watchdog answered it, s
-# (a hop costs tens of microseconds; this leaves room for a busy machine)
-_SETTLE_S = 0.01
+# the most wall time the tick's messages get to land after the amplifier's watchdog answered
+# it, s (a quarter of lockstep_timeout_s below that): a hop costs tens of microseconds, this
+# leaves room for a busy machine, and it is spent only while the watchdog holds 0 kV
+_SETTLE_S = 0.05
 
 def make_actuator(variant: str) -> Actuator:
     """The actuator model of a variant: ``nominal``, ``truth``, or ``truth:EFFECT(p=v)+...``
@@ -117,7 +118,7 @@ class PlantNode(Node):
             self.create_timer(period, self.on_wall_tick, clock=steady)
         else:
             self.create_timer(min(self.lockstep_timeout_s / 2, 0.05), self.on_lockstep_watch, clock=steady)
-            self._settle = self.create_timer(min(self.lockstep_timeout_s / 2, _SETTLE_S), self._on_settled,
+            self._settle = self.create_timer(min(self.lockstep_timeout_s / 4, _SETTLE_S), self._on_settled,
                                              clock=steady)
             self._settle.cancel()
             if autostart:
