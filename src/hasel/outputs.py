@@ -68,6 +68,10 @@ def check_output(path: str | os.PathLike, overwrite: bool, what: str = "") -> Pa
 
 def check_outputs(args: argparse.Namespace, outputs: Iterable[Output]) -> None:
     """:func:`check_output` for every declared output option that was given."""
+    outputs = list(outputs)
+    dests = {o.dest for o in outputs}
+    inputs = {Path(v).resolve() for k, v in vars(args).items()
+              if k not in dests and isinstance(v, str) and v and not k.startswith("_") and Path(v).is_file()}
     seen: dict[Path, str] = {}
     for o in outputs:
         value = getattr(args, o.dest, None)
@@ -79,6 +83,8 @@ def check_outputs(args: argparse.Namespace, outputs: Iterable[Output]) -> None:
         if key in seen:
             raise BadInputError(f"{opt} and {seen[key]} name the same file {path}")
         seen[key] = opt
+        if key in inputs:
+            raise BadInputError(f"{opt} {path} is also an input of this command; choose another name")
         check_output(path, bool(getattr(args, "overwrite", False)), opt)
 
 

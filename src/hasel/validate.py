@@ -59,7 +59,7 @@ def text_file(name: str, path: str, limit_bytes: int = 64 << 20) -> Path:
     """
     p = Path(path)
     if not p.exists():
-        raise BadInputError(f"{name} file not found: {p}")
+        raise BadInputError(f"no such {name.lstrip('-')} file: {p} (given as {name})")
     if not p.is_file():
         raise BadInputError(f"{name} {p} is not a regular file")
     try:
