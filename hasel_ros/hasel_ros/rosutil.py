@@ -176,21 +176,33 @@ def diagnostic(node: Node, level: bytes, message: str, t_s: float, **values: Any
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """Standard Jazzy main: init, spin one node, clean shutdown on Ctrl-C or SIGTERM."""
-    rclpy.init(args=args)
+    """Standard Jazzy main: init, spin one node, clean shutdown on Ctrl-C, SIGTERM or SIGHUP.
+
+    A bad parameter at start (out of range, wrong type, unsafe, unparsable ``--ros-args``)
+    is one line on stderr and exit code 2; the node is never built, so nothing is commanded.
+    """
+    import signal
+
+    from rclpy.exceptions import ParameterException
+
+    from hasel.errors import BadInputError
+
+    try:
+        rclpy.init(args=args)
+    except Exception as err:  # noqa: BLE001 - e.g. RCLError for a malformed -p NAME:=VALUE
+        sys.stderr.write(f"error: bad arguments: {str(err).splitlines()[0] if str(err) else type(err).__name__}\n")
+        return 2
+    if hasattr(signal, "SIGHUP"):  # a closed terminal stops the node as SIGTERM does (rclpy handles that)
+        signal.signal(signal.SIGHUP, lambda *_: signal.raise_signal(signal.SIGTERM))
     node = None
     try:
         node = factory()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except Exception as err:  # noqa: BLE001 - a node start-up error is one line, not a traceback
-        from hasel.errors import BadInputError
-
-        if isinstance(err, BadInputError):
-            sys.stderr.write(f"error: {err}\n")
-            return 2
-        raise
+    except (BadInputError, ParameterException) as err:  # a start-up error is one line, not a traceback
+        sys.stderr.write(f"error: {err}\n")
+        return 2
     finally:
         if node is not None:
             shutdown = getattr(node, "on_shutdown", None)

@@ -15,6 +15,7 @@ import numpy as np
 
 from hasel.calibration import CalibrationFit, fit_calibration
 from hasel.errors import BadInputError
+from hasel.outputs import replacing
 
 __all__ = ["run", "calibrate"]
 
@@ -62,9 +63,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"polynomial (descending powers of elapsed_us): {list(cal.coeffs)}")
     print(f"largest error: {fit.max_error_pct:.2f} % (paper: < 5 %)")
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    cal.to_yaml(out, {"points_mm": points, "elapsed_us": fit.elapsed_us.tolist(), "laser_mm": fit.laser_mm.tolist(),
-                      "residual_mm": fit.residual_mm.tolist(), "max_error_pct": fit.max_error_pct,
-                      "hold_s": args.hold, "plant": args.plant})
+    with replacing(out) as tmp:
+        cal.to_yaml(tmp, {"points_mm": points, "elapsed_us": fit.elapsed_us.tolist(),
+                          "laser_mm": fit.laser_mm.tolist(), "residual_mm": fit.residual_mm.tolist(),
+                          "max_error_pct": fit.max_error_pct, "hold_s": args.hold, "plant": args.plant})
     print(f"wrote {out} (load it with: hasel steps --feedback strain --calibration {out})")
     return 0

@@ -30,6 +30,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.signals import Schedule, protocol_schedule
+from hasel.validate import finite, seed
 from hasel_ros.rosutil import to_stamp, topic_qos
 from hasel_msgs.msg import ExperimentMarker, SampleBatch, VoltageCommand
 
@@ -125,6 +126,37 @@ def _floats(name: str, text: str) -> list[float]:
     return vals
 
 
+def check_excitation(offsets_kv: list[float], amplitude_kv: float, f0_hz: float, f1_hz: float, kind: str,
+                     repeats: int, rate_hz: float = paper.PLANT_RATE_HZ) -> None:
+    """Refuse an excitation the amplifier or the sampling cannot carry, naming the limit.
+
+    Every offset +- amplitude (kV) must stay within the amplifier's 0 .. 9 kV (outside,
+    the command is clipped and the log identifies the clipping, not the plant); the
+    highest frequency the excitation reaches (``kind="paper"``: about 2 f1, see
+    :func:`hasel.signals.paper_chirp`) must be below the Nyquist frequency rate_hz / 2.
+    """
+    a = finite("--amplitude", amplitude_kv)
+    if a <= 0:
+        raise BadInputError(f"--amplitude must be > 0 kV, got {a:g}")
+    top = paper.V_MAX_KV
+    for v in offsets_kv:
+        if v - a < 0 or v + a > top:
+            raise BadInputError(f"--offsets: {v:g} kV with amplitude {a:g} kV spans {v - a:g} .. {v + a:g} kV, "
+                                f"outside the amplifier's 0 .. {top:g} kV; offsets must be in "
+                                f"[{a:g}, {top - a:g}] kV")
+    f0, f1 = finite("--f0", f0_hz), finite("--f1", f1_hz)
+    if f0 < 0 or f1 <= f0:
+        raise BadInputError(f"the band needs 0 <= --f0 < --f1, got {f0:g} and {f1:g} Hz")
+    highest = 2.0 * (f1 - f0) if kind == "paper" else f1
+    nyquist = rate_hz / 2.0
+    if highest >= nyquist:
+        extra = f" (the paper's formula ends near 2 f1 = {highest:g} Hz)" if kind == "paper" else ""
+        raise BadInputError(f"--f1 {f1:g} Hz: the excitation reaches {highest:g} Hz{extra}, above the "
+                            f"{nyquist:g} Hz Nyquist frequency of the {rate_hz:g} Hz sampling")
+    if repeats < 1:
+        raise BadInputError(f"--repeats must be >= 1, got {repeats}")
+
+
 def run(args: argparse.Namespace) -> int:
     """CLI: ``hasel chirp``."""
     offsets = _floats("--offsets", args.offsets)
@@ -134,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
             raise BadInputError(f"--{name.replace('_', '-')} must be >= 0 and a multiple of 5 ms, got {v}")
     if args.duration <= 0:
         raise BadInputError("--duration must be > 0 s")
+    check_excitation(offsets, args.amplitude, args.f0, args.f1, args.chirp, args.repeats)
     from sim_plant.plant_node import make_actuator
 
     make_actuator(args.plant)
@@ -166,4 +199,4 @@ def add_arguments(p: argparse.ArgumentParser, defaults: Sequence | None = None) 
                    help="charge reversal (-1 kV) before each test, s")
     p.add_argument("--settle-s", dest="settle_s", type=float, default=0.0, help="hold at the offset first, s")
     p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
-    p.add_argument("--seed", type=int, default=0, help="noise (and multisine phase) seed")
+    p.add_argument("--seed", type=seed, default=0, help="noise (and multisine phase) seed, 0 .. 2^31-1")

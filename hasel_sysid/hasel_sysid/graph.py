@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.time_source import TimeSource
 
-from hasel import paper
+from hasel import interrupt, paper
 from hasel.errors import HaselError
 from hasel.plant import Actuator
 from hasel_control.amplifier_node import HvAmplifierNode
@@ -136,6 +136,10 @@ class NodeGraph:
     def __init__(self, config: GraphConfig | None = None, extra_nodes: list[Callable[[Context], Node]] = (),
                  quiet: bool = True):
         self.config = cfg = config or GraphConfig()
+        # from here to the end of close() a stop signal is only recorded: run() polls it
+        # and stops, close() commands 0 kV and closes every file, then it is raised
+        self._deferred = interrupt.deferred()
+        self._deferred.__enter__()
         self.context = Context()
         # a private domain: nothing outside this job can reach into the graph, or hear it
         from hasel.rosenv import private_domain
@@ -200,6 +204,7 @@ class NodeGraph:
                        lambda: self.reference is None or len(c.references) == len(self.config.sequence_mm)]
         deadline = time.monotonic() + timeout_s
         while not all(ok() for ok in checks):
+            interrupt.check()
             if time.monotonic() > deadline:
                 raise HaselError("the node graph did not connect within "
                                  f"{timeout_s} s (DDS discovery); is ROS_DOMAIN_ID shared with a busy network?")
@@ -218,7 +223,9 @@ class NodeGraph:
             target = min(duration_s, self.plant.now_s() + chunk)
             fut = Future()
             self.plant.notify_at(target, fut)
-            self.executor.spin_until_future_complete(fut, timeout_sec=1.0)
+            # a bounded wait: a signal handler only sets a flag, checked here
+            self.executor.spin_until_future_complete(fut, timeout_sec=0.25)
+            interrupt.check()
             if progress is not None:
                 progress(self.plant.now_s())
             if limit is not None and time.monotonic() > limit:
@@ -228,19 +235,28 @@ class NodeGraph:
             self.executor.spin_once(timeout_sec=0.001)
 
     def close(self) -> None:
-        """Destroy the nodes and shut the context down (0 kV is commanded on the way)."""
-        amp = getattr(self, "amplifier", None)
-        if amp is not None:
-            amp.on_shutdown()
-        ex = getattr(self, "executor", None)
-        if ex is not None:
-            ex.shutdown()
-        for n in getattr(self, "nodes", []):
-            n.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        """Destroy the nodes and shut the context down (0 kV is commanded on the way; the
+        recorder's file gets its summary and footer). Safe to call twice."""
+        try:
+            amp = getattr(self, "amplifier", None)
+            if amp is not None:
+                amp.on_shutdown()
+            ex = getattr(self, "executor", None)
+            if ex is not None:
+                ex.shutdown()
+            for n in getattr(self, "nodes", []):
+                n.destroy_node()
+            self.nodes = []
+            rclpy.try_shutdown(context=self.context)
+        finally:
+            if self._deferred is not None:
+                self._deferred.__exit__(None, None, None)
+                self._deferred = None
 
     def __enter__(self) -> NodeGraph:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+        if exc[0] is None:
+            interrupt.check()  # a signal that came while closing still ends the command

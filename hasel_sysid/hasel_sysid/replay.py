@@ -10,6 +10,7 @@ drops nothing.
 from __future__ import annotations
 
 import argparse
+import signal
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -17,9 +18,11 @@ from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 
+from hasel import interrupt
 from hasel.errors import BadInputError, DataFileError
 from hasel_ros.rosutil import message_class
 
@@ -115,7 +118,7 @@ def run_replay(args: argparse.Namespace) -> int:
     first = next(read_raw(args.file, topics), None)  # validates the file before ROS starts
     if first is None:
         raise BadInputError(f"{args.file}: no messages{' on ' + ','.join(topics) if topics else ''}")
-    rclpy.init()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)  # hasel.interrupt handles the signals
     node = rclpy.create_node("hasel_replay")
     rep = Replayer(node, remap, clock=args.clock)
     try:
@@ -134,8 +137,6 @@ def run_replay(args: argparse.Namespace) -> int:
                     time.sleep(delay)
             rep.publish(m)
         time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -144,35 +145,37 @@ def run_replay(args: argparse.Namespace) -> int:
 
 
 def run_record(args: argparse.Namespace) -> int:
-    """CLI: ``hasel record -o FILE.mcap [--topics a,b] [--duration S]``: until Ctrl-C/SIGTERM or the duration."""
-    from rclpy._rclpy_pybind11 import RCLError
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    """CLI: ``hasel record -o FILE.mcap [--topics a,b] [--duration S]``: until the duration or a signal.
+
+    SIGINT, SIGTERM and SIGHUP stop it alike: the spin loop notices the flag the handler
+    set, the file is closed with its summary and footer, and the command exits with
+    128 + the signal number (a complete file either way).
+    """
+    from rclpy.executors import SingleThreadedExecutor
 
     from hasel_sysid.recorder_node import RecorderNode
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise BadInputError(f"{out} exists; use --overwrite to replace it")
+    if args.duration is not None and not (args.duration > 0 and args.duration < float("inf")):
+        raise BadInputError(f"--duration must be a positive number of seconds, got {args.duration}")
     out.parent.mkdir(parents=True, exist_ok=True)
     topics = [t for t in (args.topics or "").split(",") if t] or None
-    rclpy.init()
-    node = RecorderNode(str(out), topics)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    # rclpy's own handlers turn SIGINT and SIGTERM into a context shutdown, which ends
-    # the spin below with ExternalShutdownException; the file is then closed in finally
-    end = None if args.duration is None else time.monotonic() + args.duration
-    try:
-        while rclpy.ok() and (end is None or time.monotonic() < end):
-            ex.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RCLError:
-        if rclpy.ok():
-            raise  # a real failure, not the signal's shutdown racing the wait set
-    finally:
-        node.destroy_node()  # closes the file: summary and footer
-        rclpy.try_shutdown()
+    with interrupt.deferred():
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
+            node = RecorderNode(str(out), topics)
+            ex = SingleThreadedExecutor()
+            ex.add_node(node)
+            end = None if args.duration is None else time.monotonic() + args.duration
+            while not interrupt.requested() and (end is None or time.monotonic() < end):
+                ex.spin_once(timeout_sec=0.1)
+        finally:
+            if node is not None:
+                node.destroy_node()  # closes the file: summary and footer
+            rclpy.try_shutdown()
     total = sum(node.counts.values())
-    print(f"recorded {total} messages on {sum(1 for c in node.counts.values() if c)} topics to {out}")
+    stopped = f" (stopped by {signal.Signals(interrupt.requested()).name})" if interrupt.requested() else ""
+    print(f"recorded {total} messages on {sum(1 for c in node.counts.values() if c)} topics to {out}{stopped}")
+    interrupt.check()
     return 0

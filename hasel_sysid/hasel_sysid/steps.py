@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ import numpy as np
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.metrics import steps_from_sequence
+from hasel.outputs import replacing, write_text
 
 __all__ = ["run", "run_steps", "format_table"]
 
@@ -100,8 +102,17 @@ def plot_steps(result: dict, path: str) -> None:
     ax2.set_xlabel("time (s)")
     ax2.set_ylim(min(-0.2, s["voltage_kv"].min() - 0.2), 9.5)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
+
+
+def reach_mm(actuator, settle_s: float = 3.0) -> float:
+    """Stroke (mm) the actuator model holds after ``settle_s`` s at the 9 kV ceiling."""
+    actuator.reset(0.0)
+    out = actuator.run(np.full(int(settle_s * actuator.rate_hz), paper.V_MAX_KV))
+    actuator.reset(0.0)
+    return float(out.stroke_mm[-1])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,17 +129,23 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError(f"--calibration file not found: {args.calibration}")
     from sim_plant.plant_node import make_actuator
 
-    make_actuator(args.plant)  # unknown variant: a clear error before any ROS work
+    reach = reach_mm(make_actuator(args.plant))  # unknown variant: a clear error before any ROS work
+    low = min(seq)
+    if low < 0:
+        raise BadInputError(f"--sequence: {low:g} mm is below 0 mm, the stroke at 0 kV (the amplifier's floor)")
+    high = max(seq)
+    if high > reach:
+        sys.stderr.write(f"hasel steps: warning: {high:g} mm is beyond the {reach:.1f} mm the {args.plant} plant "
+                         f"reaches at the {paper.V_MAX_KV:g} kV ceiling; the loop will saturate at "
+                         f"{paper.V_MAX_KV:g} kV there\n")
     res = run_steps(args.feedback, seq, args.hold, seed=args.seed, plant=args.plant,
                     calibration_file=args.calibration or "", record=args.record)
     print(format_table(res["steps"], args.feedback))
     print(f"applied voltage: {res['min_applied_kv']:.3f} .. {res['max_applied_kv']:.3f} kV (ceiling 9 kV)")
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps({k: v for k, v in res.items() if k != "_signals"}, indent=2))
+        write_text(args.json, json.dumps({k: v for k, v in res.items() if k != "_signals"}, indent=2))
         print(f"wrote {args.json}")
     if args.plot:
-        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
         plot_steps(res, args.plot)
         print(f"wrote {args.plot}")
     if args.record:

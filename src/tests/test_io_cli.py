@@ -83,7 +83,7 @@ def test_info_and_salvage_of_a_killed_recording(log, tmp_path, capsys):
     capsys.readouterr()
     assert main(["salvage", str(cut), str(out)]) == 2  # exists
     assert "exists" in capsys.readouterr().err
-    assert main(["salvage", str(cut), str(out), "--force"]) == 0
+    assert main(["salvage", str(cut), str(out), "--overwrite"]) == 0
 
 
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
@@ -95,4 +95,4 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
     assert main(["info", str(junk)]) == 2
     assert "not an MCAP file" in capsys.readouterr().err
     assert main(["salvage", str(junk), str(junk)]) == 2
-    assert "is the damaged file itself" in capsys.readouterr().err
+    assert "is also an input of this command" in capsys.readouterr().err

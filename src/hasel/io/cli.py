@@ -17,6 +17,7 @@ from collections.abc import Callable
 from hasel.errors import DataFileError
 from hasel.io.info import format_info, info
 from hasel.io.salvage import salvage
+from hasel.outputs import write_text
 
 __all__ = ["add_info_arguments", "run_info", "add_salvage_arguments", "run_salvage"]
 
@@ -71,11 +72,7 @@ def run_info(args: argparse.Namespace) -> int:
                         "rate_hz": None if math.isnan(t.rate_hz) else t.rate_hz,
                         "schema_error": t.schema_error} for t in report.topics],
         }
-        try:
-            with open(args.json, "w", encoding="utf-8") as f:
-                json.dump(doc, f, indent=2)
-        except OSError as err:
-            raise DataFileError(f"cannot write {args.json}: {err.strerror or err}") from err
+        write_text(args.json, json.dumps(doc, indent=2))
     if not report.complete:
         first = report.damages[0] if report.damages else "incomplete file"
         raise DataFileError(f"{args.file} is damaged ({first}); {report.message_count} messages are recoverable "
@@ -87,11 +84,14 @@ def add_salvage_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``hasel salvage``."""
     p.add_argument("file", metavar="FILE", help="a damaged MCAP file (e.g. a recording killed before it closed)")
     p.add_argument("out", metavar="OUT", help="the valid MCAP file to write")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--overwrite", "--force", dest="overwrite", action="store_true", help="replace OUT if it exists")
 
 
 def run_salvage(args: argparse.Namespace) -> int:
     """Write the intact chunks of FILE to OUT as a valid MCAP file; print what was recovered."""
-    report = salvage(args.file, args.out, overwrite=args.force, progress=_progress("salvaging", _size(args.file)))
+    report = salvage(args.file, args.out, overwrite=args.overwrite, progress=_progress("salvaging", _size(args.file)))
     sys.stdout.write(report.summary() + "\n")
+    if report.messages == 0 and not report.intact:
+        raise DataFileError(f"no message of {args.file} could be recovered; {args.out} holds only its "
+                            "topics and types")
     return 0

@@ -124,10 +124,18 @@ def _validate(t: np.ndarray, u: np.ndarray, y: np.ndarray, names: tuple[str, str
                             f"{t[i - 1]!r} then {t[i]!r} s")
 
 
+def _distinct(in_name: str, out_name: str, source: object) -> None:
+    """Refuse an input and an output that are the same signal (a fit of a signal to itself means nothing)."""
+    if in_name == out_name:
+        raise BadInputError(f"{source}: input and output are the same signal {in_name!r}; "
+                            "choose different --input and --output")
+
+
 def _from_table(table: Table, time: str | None, input: str | None, output: str | None,
                 min_samples: int, row_offset: int) -> IOData:
     in_name, u = table.column(input or DEFAULT_INPUT, None if table.label != "column" else "input column")
     out_name, y = table.column(output or DEFAULT_OUTPUT, None if table.label != "column" else "output column")
+    _distinct(in_name, out_name, table.source)
     notes: list[str] = []
     tspec = time or DEFAULT_TIME
     t = _uniform_time(tspec, u.size)
@@ -155,6 +163,7 @@ def _from_table(table: Table, time: str | None, input: str | None, output: str |
 def _from_mcap(path: Path, time: str | None, input: str | None, output: str | None, min_samples: int) -> IOData:
     in_spec = input or DEFAULT_MCAP_INPUT
     out_spec = output or DEFAULT_MCAP_OUTPUT
+    _distinct(in_spec, out_spec, path)
     notes: list[str] = []
     if time is not None:
         notes.append(f"time {time!r} ignored: MCAP times come from header.stamp (or the log time)")

@@ -66,10 +66,14 @@ class SalvageReport:
         if self.intact:
             lines.append("the source was not damaged: the copy is complete")
         else:
-            lost = f"{self.chunks_lost} damaged chunks skipped" if self.chunks_lost else "no intact chunk was lost"
+            c = self.chunks_lost
+            lost = (f"{c} damaged chunk{'' if c == 1 else 's'} lost, with the messages in {'it' if c == 1 else 'them'}"
+                    if c else "the damage lay outside the chunks: no chunk was lost")
             n = len(self.damages)
             lines.append(f"{n} problem{'' if n == 1 else 's'} found ({lost}); first: {self.damages[0]}"
                          if self.damages else lost)
+        if self.messages == 0 and not self.intact:
+            lines.append("no message could be recovered")
         if self.dropped:
             lines.append(f"{self.dropped} messages dropped: their channel definition was in a damaged part")
         for topic, n in sorted(self.topics.items()):
@@ -109,7 +113,7 @@ def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwri
     if d.exists() and (d.resolve() == s.resolve()):
         raise BadInputError(f"the output {d} is the damaged file itself; choose another name")
     if d.exists() and not overwrite:
-        raise BadInputError(f"{d} exists; choose another name (or --force to replace it)")
+        raise BadInputError(f"{d} exists; choose another name (or --overwrite to replace it)")
     stream = McapStream(s, tolerant=True)
     summ = read_summary(s)  # a damaged data section may still have an intact summary
     schema_map: dict[int, int] = {}
@@ -178,5 +182,7 @@ def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwri
     if progress is not None:
         progress(1.0)
     intact = not stream.damages and stream.footer
-    return SalvageReport(s, d, messages, stream.chunks, stream.chunks_skipped, dropped, topics,
+    # a chunk cut by truncation is damaged too, though the reader had nothing left to skip
+    cut = {dm.offset for dm in stream.damages if dm.record == "chunk"}
+    return SalvageReport(s, d, messages, stream.chunks, max(stream.chunks_skipped, len(cut)), dropped, topics,
                          tuple(stream.damages), intact, t_lo or 0, t_hi)

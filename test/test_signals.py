@@ -1,0 +1,120 @@
+"""SIGINT, SIGTERM and SIGHUP stop every file-writing command alike: the experiment
+stops, the files are closed (mcap's own reader opens them, summary and footer there),
+nothing above 9 kV was recorded, and the exit code is 128 + the signal number. Also
+when the command runs in the background of a script (SIGINT ignored there)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+ROOT = Path(__file__).resolve().parents[1]
+HASEL = str(ROOT / ".venv" / "bin" / "hasel")
+
+
+def _env() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if k != "HASEL_ROS_ENV_READY"}
+
+
+def recorded_kv(path: Path) -> tuple[int, float]:
+    """Messages in a complete MCAP file (mcap's reader, summary required) and the highest
+    applied voltage recorded anywhere in it, kV."""
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_summary() is not None, "no summary: the file was not closed"
+        n, top = 0, 0.0
+        for _, ch, _, m in reader.iter_decoded_messages():
+            n += 1
+            if ch.topic == "/amp/applied":
+                top = max(top, m.applied_kv)
+            elif ch.topic in ("/plant/batch", "/amp/applied_batch") and len(m.voltage_kv):
+                top = max(top, float(np.nanmax(np.asarray(m.voltage_kv))))
+    return n, top
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, min_bytes: int = 1, timeout_s: float = 60.0) -> None:
+    """Wait until the command has been recording for a while (its file has data)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        if path.exists() and path.stat().st_size >= min_bytes:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{path} got no data in {timeout_s} s")
+
+
+COMMANDS = {
+    "steps": ["steps", "--sequence", "2,4,6,4,2", "--hold", "10", "--record", "{out}"],
+    "chirp": ["chirp", "--offsets", "3,5", "--out", "{out}"],
+}
+
+
+@pytest.mark.parametrize("sig,command", [("SIGTERM", "steps"), ("SIGINT", "steps"), ("SIGHUP", "steps"),
+                                         ("SIGTERM", "chirp"), ("SIGHUP", "chirp")])
+def test_a_signal_mid_run_closes_the_file_and_exits_128_plus_the_signal(tmp_path, sig, command):
+    out = tmp_path / "run.mcap"
+    proc = subprocess.Popen([HASEL, *[a.format(out=out) for a in COMMANDS[command]]], env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(out, proc, min_bytes=200_000)  # a few chunks written: mid-run
+        proc.send_signal(getattr(signal, sig))
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + getattr(signal, sig), err
+    assert "Traceback" not in err
+    assert f"stopped by {sig}" in err.splitlines()[-1]
+    n, top = recorded_kv(out)
+    assert n > 100
+    assert 0.0 < top <= 9.0
+    assert not list(tmp_path.glob(".*part*")), "a temporary file was left behind"
+
+
+def test_in_the_background_of_a_script_sigint_is_ignored_and_sigterm_stops_cleanly(tmp_path):
+    out = tmp_path / "bg.mcap"
+    pidfile, rcfile = tmp_path / "pid", tmp_path / "rc"
+    # a non-interactive shell starts background jobs with SIGINT ignored
+    script = (f"{HASEL} steps --sequence 2,4,6,4,2 --hold 10 --record {out} >/dev/null 2>{tmp_path}/err & "
+              f"echo $! > {pidfile}; wait $!; echo $? > {rcfile}")
+    shell = subprocess.Popen(["bash", "-c", script], env=_env())
+    try:
+        deadline = time.monotonic() + 30
+        while not (pidfile.exists() and pidfile.read_text().strip()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        pid = int(pidfile.read_text())
+        _wait_for(out, shell, min_bytes=200_000)
+        os.kill(pid, signal.SIGINT)  # ignored, as the shell meant
+        time.sleep(1.0)
+        assert shell.poll() is None and not rcfile.exists(), "SIGINT stopped a background job"
+        os.kill(pid, signal.SIGTERM)
+        shell.wait(timeout=60)
+    finally:
+        shell.kill()
+    assert int(rcfile.read_text()) == 128 + signal.SIGTERM
+    assert "Traceback" not in (tmp_path / "err").read_text()
+    n, top = recorded_kv(out)
+    assert n > 100 and top <= 9.0
+
+
+def test_hasel_record_stopped_by_sighup_leaves_a_complete_file(tmp_path):
+    out = tmp_path / "rec.mcap"
+    proc = subprocess.Popen([HASEL, "record", "-o", str(out), "--topics", "/nothing_here"], env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(out, proc)  # the header is on disk: the recorder runs
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGHUP)
+        stdout, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGHUP, err
+    assert "stopped by SIGHUP" in stdout and "Traceback" not in err
+    n, _ = recorded_kv(out)
+    assert n == 0
