@@ -9,7 +9,10 @@
   direction (and optionally on the level); a per-sample recursion.
 - :func:`scale_resonances` — multiply the inertia (``s^2`` term) of every complex
   pole pair of a denominator.
-- :class:`DelayLine` — an integer-sample delay that keeps its memory across blocks.
+- :class:`DelayStage` — a (fractional) sample delay that keeps its memory across blocks;
+  :class:`DelayLine`, the integer one.
+- :func:`rate_limited` — a signal followed at a bounded speed in either direction (slew and
+  speed limits).
 """
 from __future__ import annotations
 
@@ -17,7 +20,8 @@ import math
 
 import numpy as np
 
-__all__ = ["play", "BoucWen", "asymmetric_lag", "scale_resonances", "DelayLine", "monotone_runs"]
+__all__ = ["play", "BoucWen", "asymmetric_lag", "scale_resonances", "DelayLine", "DelayStage", "monotone_runs", "rate_limited",
+           "rate_step"]
 
 
 def monotone_runs(x: np.ndarray) -> np.ndarray:
@@ -219,8 +223,39 @@ def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:
     return np.real(out)
 
 
-class DelayLine:
-    """Integer-sample delay keeping its memory across calls.
+class DelayStage:
+    """A delay of ``delay_samples`` (>= 0, fractional allowed) samples, chunk by chunk.
+
+    ``y_k = x_(k-n) + f (x_(k-n-1) - x_(k-n))`` with ``n + f = delay_samples``: linear
+    interpolation between the two samples around ``t_k - d``; before the first sample
+    the input is the value it was reset to.
+    """
+
+    def __init__(self, delay_samples: float) -> None:
+        if not delay_samples >= 0:
+            raise ValueError(f"delay must be >= 0 samples, got {delay_samples}")
+        self.n = int(math.floor(delay_samples))
+        self.f = float(delay_samples - self.n)
+        self.m = self.n + 1  # memory: x_(k-n-1) .. x_(k-1)
+        self.buf = np.zeros(self.m)
+
+    def reset(self, x0: float) -> None:
+        """Memory filled with ``x0`` (held forever before)."""
+        self.buf = np.full(self.m, float(x0))
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """The next samples ``x``, delayed."""
+        x = np.asarray(x, float)
+        full = np.concatenate([self.buf, x])
+        k = np.arange(x.size)
+        a = full[k + self.m - self.n]
+        y = a if self.f == 0.0 else a + self.f * (full[k + self.m - self.n - 1] - a)
+        self.buf = full[full.size - self.m:]
+        return y
+
+
+class DelayLine(DelayStage):
+    """Integer-sample delay keeping its memory across calls (a :class:`DelayStage` without fraction).
 
     Parameters
     ----------
@@ -229,18 +264,51 @@ class DelayLine:
     """
 
     def __init__(self, n_samples: int) -> None:
-        self.n = int(n_samples)
-        self.buf = np.zeros(self.n)
+        super().__init__(int(n_samples))
 
-    def reset(self, x0: float) -> None:
-        """Memory filled with ``x0`` (held forever)."""
-        self.buf = np.full(self.n, float(x0))
 
-    def run(self, x: np.ndarray) -> np.ndarray:
-        """The input delayed by ``n_samples``."""
-        x = np.asarray(x, float)
-        if self.n == 0:
-            return x.copy()
-        full = np.concatenate([self.buf, x])
-        self.buf = full[full.size - self.n:]
-        return full[:x.size]
+def rate_limited(x: np.ndarray, up: float, down: float, y0: float | None = None) -> np.ndarray:
+    """``y_k = y_{k-1} + clip(x_k - y_{k-1}, -down, up)`` (steps per sample, ``inf``: free).
+
+    Starts from ``y0`` (default ``x[0]``); feeding consecutive chunks with ``y0`` the last
+    output of the previous chunk gives the same samples as one call.
+
+    The limit acts only where the signal moves faster than it (or after it did, until the
+    output has caught up): the samples in between are copied, only the active runs looped.
+    """
+    xs = np.asarray(x, float)
+    out = xs.copy()
+    if xs.size == 0:
+        return out
+    y = float(xs[0]) if y0 is None else float(y0)
+    d0 = np.diff(xs, prepend=y)
+    fast = np.flatnonzero((d0 > up) | (d0 < -down))
+    vals = xs.tolist()
+    n = xs.size
+    j = 0
+    while j < fast.size:
+        k = int(fast[j])
+        y = vals[k - 1] if k > 0 else y
+        while k < n:  # active: follow at the limit until the output meets the signal again
+            d = vals[k] - y
+            if d > up:
+                y += up
+            elif d < -down:
+                y -= down
+            else:
+                y = vals[k]
+                out[k] = y
+                k += 1
+                break
+            out[k] = y
+            k += 1
+        j = int(np.searchsorted(fast, k, side="left"))  # caught up: copy until the next fast sample
+    return out
+
+
+def rate_step(rate: float, dt: float) -> float:
+    """Largest change per sample for ``rate`` (units per second) at ``dt`` (s); ``rate`` must be > 0."""
+    step = float(rate) * float(dt)
+    if not step > 0:
+        raise ValueError(f"rate limit must be > 0, got {rate}")
+    return step

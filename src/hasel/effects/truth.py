@@ -23,11 +23,13 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 import numpy as np
-from scipy import signal
 
-from hasel.effects.operators import BoucWen, DelayLine, asymmetric_lag
-from hasel.effects.params import (AsymmetricDynamics, ChargeDrift, Effect, Hysteresis, LoadMass,
-                                  SensorNonlinearity, Saturation, StaticNonlinearity, TimeDelay)
+from hasel.effects.base import Effect, Stage
+from hasel.effects.drift import DriftStage
+from hasel.effects.load import LoadMass
+from hasel.effects.registry import FAMILIES
+from hasel.effects.saturation import Saturation
+from hasel.effects.sensor import SensorNonlinearity
 from hasel.errors import BadInputError
 from hasel.lti import SosFilter, zoh_sos
 from hasel.plant import ActuatorSamples, NominalConfig, amplifier_filter_tf
@@ -78,20 +80,23 @@ class TruthActuator:
                 raise BadInputError(f"effect {e.name} given twice")
             self.effects[e.name] = e
         eff = self.effects
-        self._static: StaticNonlinearity | None = eff.get("static_nonlinearity")  # type: ignore[assignment]
-        self._asym: AsymmetricDynamics | None = eff.get("asymmetric_dynamics")  # type: ignore[assignment]
-        self._drift: ChargeDrift | None = eff.get("charge_drift")  # type: ignore[assignment]
         sat: Saturation | None = eff.get("saturation")  # type: ignore[assignment]
-        self._sat_amp = sat if sat is not None and sat.kind == "amplifier" else None
-        self._sat_stroke = sat if sat is not None and sat.kind == "stroke" else None
-        delay: TimeDelay | None = eff.get("time_delay")  # type: ignore[assignment]
         self._sensor: SensorNonlinearity | None = eff.get("sensor_nonlinearity")  # type: ignore[assignment]
         self._load: LoadMass | None = eff.get("load_mass")  # type: ignore[assignment]
-        hyst: Hysteresis | None = eff.get("hysteresis")  # type: ignore[assignment]
 
-        self._delay = DelayLine(int(round(delay.delay_s * self.rate_hz))) if delay else None
-        self._hyst = BoucWen(*hyst.beta_gamma) if hyst else None
-        self._hyst_k = hyst.half_width_kv / hyst.h_sat_kv if hyst else 0.0
+        def stage(name: str, when: bool = True) -> Stage | None:
+            # every effect runs its family's own chunked stage (the code the diagnosis fits)
+            e = eff.get(name)
+            return FAMILIES[name].truth_stage(e, self.dt_s) if e is not None and when else None
+
+        self._delay = stage("time_delay")
+        self._sat_amp = stage("saturation", sat is not None and sat.kind == "amplifier")
+        self._static = stage("static_nonlinearity")
+        self._hyst = stage("hysteresis")
+        self._asym = stage("asymmetric_dynamics")
+        self._drift: DriftStage | None = stage("charge_drift")  # type: ignore[assignment]
+        self._sat_stroke = stage("saturation", sat is not None and sat.kind == "stroke")
+        self._sag = stage("load_mass")
         num = np.asarray(self.config.num, float)
         den = np.asarray(self.config.den, float)
         if self._load is not None:
@@ -105,28 +110,18 @@ class TruthActuator:
             self._plant = SosFilter(zoh_sos(np.polymul(amp_num, num), np.polymul(amp_den, den), self.dt_s,
                                             output="end"))
         self._p0 = float(num[-1] / den[-1])
-        if self._drift is not None:
-            a = -np.expm1(-self.dt_s / self._drift.tau_s)
-            self._drift_ba = (np.array([a]), np.array([1.0, a - 1.0]))
-        self._q_zi = np.zeros(1)
         self._v_prev = 0.0
-        self._z_asym = 0.0
         self.strain_curve: Callable[[np.ndarray], np.ndarray] | None = (
             self._sensor.apply if self._sensor is not None else None)
         self.reset(0.0)
 
     # -- helpers -------------------------------------------------------------------------
     def _clip_cmd(self, u: np.ndarray) -> np.ndarray:
-        if self._sat_amp is None:
-            return u
-        lim = self._sat_amp.limit_kv
-        return np.clip(u, -lim, lim)
+        return u if self._sat_amp is None else self._sat_amp.run(u)
 
     def _veff(self, applied: np.ndarray) -> np.ndarray:
-        v = applied if self._static is None else self._static.apply(applied)
-        if self._hyst is not None:
-            v = v - self._hyst_k * self._hyst.run(v)
-        return v
+        v = applied if self._static is None else self._static.run(applied)
+        return v if self._hyst is None else self._hyst.run(v)
 
     def measure_mm(self, stroke_mm: np.ndarray) -> np.ndarray:
         """Stroke (mm) the strain sensor reports for the true ``stroke_mm`` (identity without a sensor effect)."""
@@ -140,14 +135,15 @@ class TruthActuator:
             self._delay.reset(u0)
         c0 = float(self._clip_cmd(np.array([u0]))[0])
         self._amp.reset(c0)
-        v0 = c0 if self._static is None else float(self._static.apply(np.array([c0]))[0])
+        v0 = c0 if self._static is None else float(self._static.run(np.array([c0]))[0])
         if self._hyst is not None:
-            self._hyst.reset(v0, 0.0)
+            self._hyst.reset(v0)
         self._v_prev = v0
         self._plant.reset(v0 if self._split else c0)
-        self._z_asym = self._p0 * v0
+        if self._asym is not None:
+            self._asym.reset(self._p0 * v0)
         if self._drift is not None:  # no trapped charge at rest (reversed by the -1 kV hold)
-            self._q_zi = np.zeros(1)
+            self._drift.reset(0.0)
 
     def run(self, command_kv: np.ndarray) -> ActuatorSamples:
         """Advance by the samples of ``command_kv`` (kV, at ``rate_hz``)."""
@@ -168,16 +164,11 @@ class TruthActuator:
         else:
             z = self._plant.run(c)
         if self._asym is not None:
-            a = self._asym
-            z = asymmetric_lag(z, self.dt_s, a.tau_activate_s, a.tau_relax_s, self._z_asym,
-                               level_dependence=a.stroke_dependence, level_ref=a.stroke_ref_mm)
-            self._z_asym = float(z[-1])
+            z = self._asym.run(z)
         if self._drift is not None:
-            b, a_ = self._drift_ba
-            q, self._q_zi = signal.lfilter(b, a_, applied, zi=self._q_zi)
-            z = z * (1.0 - self._drift.gain_loss_per_kv * q) + self._drift.offset_mm_per_kv * q
+            z = self._drift.run(z, applied)
         if self._sat_stroke is not None:
-            z = self._sat_stroke.clip_stroke(z)
-        if self._load is not None and self._load.sag_mm:
-            z = z - self._load.sag_mm
+            z = self._sat_stroke.run(z)
+        if self._sag is not None:
+            z = self._sag.run(z)
         return ActuatorSamples(applied_kv=applied, stroke_mm=z)

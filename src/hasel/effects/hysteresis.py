@@ -1,0 +1,205 @@
+"""``hysteresis``: rate-independent memory of the input (the zipping front).
+
+Forms
+-----
+- truth :class:`Hysteresis`: a Bouc-Wen element ``h`` on the effective voltage; the
+  actuator sees ``v - (half_width_kv / h_sat_kv) h`` (:class:`BoucWenStage`).
+- generic ``input`` (``theta = (w_1 .. w_5, c)``): Prandtl-Ishlinskii,
+  ``x + sum_j w_j (play_rj(x) - x)``, ``w_j >= 0``, the five half-widths ``r_j`` fixed
+  fractions (:data:`HYST_THRESHOLDS`) of the input's range, the plays starting at
+  ``x_0 + c r_j`` (``c`` in [-1, 1]: the branch the log starts on)
+  (:class:`PlayStage`).
+
+Both carry their memory between chunks exactly (a play operator's recursion is a
+clamp, and a composition of clamps is a clamp: bit for bit).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
+from hasel.effects.fitkit import _downstream_nonlinear, _fit_scalar, _ls, _refine
+from hasel.effects.operators import BoucWen, monotone_runs, play
+from hasel.validate import in_range, positive
+
+__all__ = ["Hysteresis", "HYST_THRESHOLDS", "PlayStage", "BoucWenStage", "branch", "HysteresisFamily", "FAMILY"]
+
+#: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
+HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
+
+
+@dataclass(frozen=True)
+class Hysteresis(Effect):
+    """Rate-independent memory of the zipping front (a Bouc-Wen element).
+
+    A Bouc-Wen state ``h`` (kV) with ``dh = dv - beta |dv| h - gamma dv |h|``
+    saturates at ``+-h_sat_kv`` (``beta + gamma = 1 / h_sat_kv``) after a reversal of
+    the applied voltage; the actuator sees ``v - (half_width_kv / h_sat_kv) h``, so the
+    stroke lags on the way up and leads on the way down by up to ``half_width_kv``
+    (the loop is ``2 half_width_kv`` wide in voltage), independently of the rate.
+
+    Attributes
+    ----------
+    half_width_kv : float
+        Half the loop's width, kV (at most ``0.95 h_sat_kv``: the branches stay monotone).
+    h_sat_kv : float
+        Voltage scale of the transition after a reversal, kV.
+    shape : float
+        ``gamma / beta`` in (-1, 1): loop shape (0: symmetric rounding).
+    """
+
+    name: ClassVar[str] = "hysteresis"
+    half_width_kv: float = 0.25
+    h_sat_kv: float = 0.5
+    shape: float = 0.0
+
+    def __post_init__(self) -> None:
+        positive("h_sat_kv", self.h_sat_kv)
+        in_range("half_width_kv", self.half_width_kv, 0.0, 0.95 * self.h_sat_kv)
+        in_range("shape", self.shape, -0.9, 0.9)
+
+    @property
+    def beta_gamma(self) -> tuple[float, float]:
+        """Bouc-Wen ``(beta, gamma)`` in 1/kV."""
+        beta = 1.0 / (self.h_sat_kv * (1.0 + self.shape))
+        return beta, self.shape * beta
+
+    @classmethod
+    def sample_params(cls, rng: np.random.Generator) -> "Hysteresis":
+        h_sat = float(rng.uniform(0.3, 0.9))
+        return cls(half_width_kv=float(h_sat * rng.uniform(0.35, 0.9)), h_sat_kv=h_sat,
+                   shape=float(rng.uniform(-0.5, 0.5)))
+
+
+class BoucWenStage:
+    """The truth form: ``v - k h`` with ``h`` a Bouc-Wen state (``k = half_width / h_sat``)."""
+
+    def __init__(self, hyst: Hysteresis) -> None:
+        self.bw = BoucWen(*hyst.beta_gamma)
+        self.k = hyst.half_width_kv / hyst.h_sat_kv
+
+    def reset(self, x0: float) -> None:
+        """At rest at ``x0`` with no memory (``h = 0``)."""
+        self.bw.reset(float(x0), 0.0)
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Effective voltage for the next samples ``x``."""
+        x = np.asarray(x, float)
+        return x - self.k * self.bw.run(x)
+
+
+def pi_output(x: np.ndarray, weights, plays) -> np.ndarray:
+    """Prandtl-Ishlinskii output ``x + sum_j w_j (p_j - x)`` for play outputs ``plays``."""
+    return x + sum(w * (p - x) for w, p in zip(weights, plays))
+
+
+class PlayStage:
+    """The generic form on thresholds ``radii`` (input unit), chunk by chunk."""
+
+    def __init__(self, weights, radii, c: float = 0.0) -> None:
+        self.w = tuple(float(v) for v in weights)
+        self.r = tuple(float(v) for v in radii)
+        self.c = float(c)
+        self.y = [0.0] * len(self.r)
+
+    def reset(self, x0: float) -> None:
+        """Plays at ``x0 + c r_j`` (the starting branch)."""
+        self.y = [float(x0) + self.c * r for r in self.r]
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Output for the next samples ``x``."""
+        x = np.asarray(x, float)
+        if x.size == 0:
+            return x.copy()
+        ps = [play(x, r, y0) for r, y0 in zip(self.r, self.y)]
+        self.y = [float(p[-1]) for p in ps]
+        return pi_output(x, self.w, ps)
+
+
+def branch(fit: EffectFit) -> float:
+    """The starting branch ``c`` of a hysteresis fit (0 for fits without one)."""
+    return float(fit.theta[len(HYST_THRESHOLDS)]) if len(fit.theta) > len(HYST_THRESHOLDS) else 0.0
+
+
+_branch = branch
+
+
+def _reversals(pipe: FitContext, u: np.ndarray) -> int:
+    """Turning points of the input, ignoring wiggles smaller than a tenth of its range (1-99 %)."""
+    return int(monotone_runs(play(u, 0.1 * pipe.u_s, float(u[0]))).size - 1)
+
+
+def _fit_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """Weights by non-negative least squares for each starting branch of a small grid, then the
+    branch refined between the best's neighbours: a log that starts after an unknown history
+    starts somewhere inside the loop (its rest level is not the loop's centre)."""
+    if min(_reversals(pipe, r.u) for r in pipe.prep.records if r.train.any()) < 2:
+        return None  # a loop needs the input to turn back and forth: a step or a ramp cannot show one
+    key = ("hfit",) + tuple(sorted((k, v.variant, v.theta) for k, v in effects.items() if v.slot < 3))
+
+    def at(c: float) -> EffectFit:
+        def basis(ri, st):
+            sim = pipe.linear_of(effects)
+            x = st["x_map"]
+            return [sim.run(p - x) for p in pipe.plays(ri, x, key, c)]
+
+        th = _ls(pipe, effects, basis, nonneg=True)
+        return EffectFit("hysteresis", "input", tuple(map(float, th)) + (float(c),))
+
+    fit = _fit_scalar(pipe, effects, at, np.array([-1.0, -0.5, 0.0, 0.5, 1.0]), maxiter=6)
+    if fit is not None and _downstream_nonlinear(effects, 3):
+        lo, hi = FAMILY.bounds(pipe, fit)
+        fit = _refine(pipe, effects, fit, lo, hi, max_nfev=25)
+    return fit
+
+
+
+class HysteresisFamily(EffectFamily):
+    """The ``hysteresis`` family (see the module's docstring)."""
+
+    name = "hysteresis"
+    slot = "input"
+    variants = ("input",)
+    truth_class = Hysteresis
+
+    def param_names(self, fit: EffectFit) -> tuple[str, ...]:
+        """``("w_1", ..., "w_5", "branch")``."""
+        names = tuple(f"w_{j + 1}" for j in range(min(len(fit.theta), len(HYST_THRESHOLDS))))
+        return names + (("branch",) if len(fit.theta) > len(HYST_THRESHOLDS) else ())
+
+    def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> PlayStage:
+        """Plays on ``scales.thresholds``, starting on the fitted branch."""
+        return PlayStage(fit.theta[:len(HYST_THRESHOLDS)], scales.thresholds, branch(fit))
+
+    def truth_stage(self, effect: Effect, dt_s: float) -> BoucWenStage:
+        """The Bouc-Wen element."""
+        assert isinstance(effect, Hysteresis)
+        return BoucWenStage(effect)
+
+    def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+        """Non-negative weights by least squares per starting branch, the branch refined; ``None`` without
+        two reversals of the input."""
+        return _fit_hysteresis(ctx, effects)
+
+    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """Weights >= 0, branch in [-1, 1]."""
+        n = fit.n_params
+        lo, hi = np.zeros(n), np.full(n, np.inf)
+        if n > len(HYST_THRESHOLDS):
+            lo[len(HYST_THRESHOLDS)], hi[len(HYST_THRESHOLDS)] = -1.0, 1.0
+        return lo, hi
+
+    def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
+                 effects: dict[str, EffectFit]) -> dict:
+        """Thresholds, weights, the loop's half-width (input unit) and the starting branch."""
+        th = fit.theta
+        return {"variant": fit.variant, "thresholds": list(ctx.thresholds), "weights": list(th[:len(HYST_THRESHOLDS)]),
+                "unit": units[0], "loop_half_width": float(sum(w * r for w, r in zip(th, ctx.thresholds))),
+                "initial_branch": branch(fit),
+                "initial_branch_note": "plays start at x0 + c*r: -1 rising branch, 0 centred, 1 falling branch"}
+
+
+FAMILY = HysteresisFamily()

@@ -1,0 +1,258 @@
+"""``load_mass``: an added mass (the paper's 25.5 g test load): the resonances fall.
+
+Forms
+-----
+- truth :class:`LoadMass`: the inertia of P(s)'s complex pole pairs times ``1 + mu``,
+  ``mu = mass_g / (actuator_mass_g moving_fraction)``, and a static sag ``-sag_mm``.
+- generic ``model`` (``theta = (mu, kappa)``) or ``model:sag`` (``(mu, kappa, sag)``): the
+  inertia of the model's resonances (or of its slowest real pole) times ``1 + mu``, the
+  gain times ``kappa``, and a static offset ``sag <= 0``.
+
+Both transform the linear model with :func:`loaded_den`; the load acts in the
+``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
+a load moves the magnitude near the resonance (and the phase with it), a delay only the
+phase, linearly in frequency.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
+from hasel.effects.fitkit import _refine, _sse, _with, sumsq
+from hasel.effects.operators import scale_resonances
+from hasel.validate import finite, in_range, positive
+
+__all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "LinearStage", "LoadFamily", "FAMILY",
+           "resonance_signature"]
+
+#: Least change of the inertia (``|mu|``) for a load to carry a static offset (its weight's sag).
+LOAD_SAG_MIN_MU = 0.1
+
+
+@dataclass(frozen=True)
+class LoadMass(Effect):
+    """An added mass on the actuator (the paper's 25.5 g test load).
+
+    The mass multiplies the inertia of the actuator's mechanical modes, the complex
+    pole pairs of P(s): ``s^2 + 2 zeta w s + w^2`` becomes ``(1 + mu) s^2 + 2 zeta w s +
+    w^2``, i.e. the resonance falls by ``sqrt(1 + mu)`` and so does its damping
+    ratio, with ``mu = mass_g / (actuator_mass_g * moving_fraction)``.
+    Its weight also compresses the actuator: a static offset ``-sag_mm``.
+
+    Attributes
+    ----------
+    mass_g : float
+        Added mass, g.
+    actuator_mass_g : float
+        Actuator mass, g (39.4 g in the paper).
+    moving_fraction : float
+        Share of the actuator's mass that moves with the stroke.
+    sag_mm : float
+        Static compression under the load's weight, mm.
+    """
+
+    name: ClassVar[str] = "load_mass"
+    mass_g: float = 25.5
+    actuator_mass_g: float = 39.4
+    moving_fraction: float = 1.0
+    sag_mm: float = 0.0
+
+    def __post_init__(self) -> None:
+        in_range("mass_g", self.mass_g, 0.0, 1e4)
+        positive("actuator_mass_g", self.actuator_mass_g)
+        in_range("moving_fraction", self.moving_fraction, 1e-3, 1.0)
+        finite("sag_mm", self.sag_mm)
+
+    @property
+    def mass_ratio(self) -> float:
+        """``mu``: added mass over the moving mass."""
+        return self.mass_g / (self.actuator_mass_g * self.moving_fraction)
+
+    def loaded_den(self, den: np.ndarray) -> np.ndarray:
+        """The denominator of P(s) (descending powers of s) with the added inertia."""
+        return loaded_den(den, self.mass_ratio, rescale=False)
+
+    @classmethod
+    def sample_params(cls, rng: np.random.Generator) -> "LoadMass":
+        return cls(mass_g=float(rng.uniform(20.0, 80.0)), moving_fraction=float(rng.uniform(0.5, 1.0)))
+
+
+def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True) -> np.ndarray:
+    """``den`` (descending powers of s) with ``1 + mu`` times the inertia of its resonances.
+
+    Each complex pole pair's ``s^2`` term is multiplied (natural frequency and damping ratio
+    fall by ``sqrt(1 + mu)``); without a resonance the slowest real pole is divided by
+    ``1 + mu``. The DC value ``den(0)`` is kept (``rescale``: also against the rounding of
+    the factorisation; the truth plant leaves it, its numbers predate the rescaling).
+    """
+    den = np.asarray(den, float)
+    if mu == 0.0:
+        return den.copy()
+    p = np.roots(den)
+    if np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))):
+        den2 = scale_resonances(den, 1.0 + mu)
+        if not rescale:
+            return den2
+    else:  # no resonance: the slowest real pole carries the inertia
+        i = int(np.argmin(np.abs(p.real)))
+        p2 = p.copy()
+        p2[i] = p[i] / (1.0 + mu)
+        den2 = np.real(np.poly(p2)) * den[0]
+    return den2 * (den[-1] / den2[-1])
+
+
+class LinearStage:
+    """A continuous model ``num/den`` discretised by zero-order hold at ``dt_s``, times ``gain``, plus
+    ``offset``; its state carried between chunks."""
+
+    def __init__(self, num, den, dt_s: float, gain: float = 1.0, offset: float = 0.0) -> None:
+        from hasel.lti import SosFilter, zoh_sos
+
+        self.filt = SosFilter(zoh_sos(np.asarray(num, float), np.asarray(den, float), dt_s, output="end"))
+        self.gain, self.offset = float(gain), float(offset)
+
+    def reset(self, x0: float) -> None:
+        """At rest with input ``x0``."""
+        self.filt.reset(float(x0))
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Output for the next input samples."""
+        y = self.filt.run(np.asarray(x, float))
+        if self.gain != 1.0:
+            y = self.gain * y
+        return y + self.offset if self.offset else y
+
+
+class SagStage:
+    """The truth form's static compression: ``y - sag_mm`` (memoryless)."""
+
+    def __init__(self, sag_mm: float) -> None:
+        self.sag = float(sag_mm)
+
+    def reset(self, x0: float) -> None:
+        """Nothing to remember."""
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """``x - sag``."""
+        x = np.asarray(x, float)
+        return x - self.sag if self.sag else x
+
+
+def resonance_signature(freqs_hz: np.ndarray, ratio: np.ndarray, f_res_hz: float) -> dict:
+    """Where a frequency-response ratio (measured over nominal) moves the response.
+
+    A load lowers the resonance: the magnitude changes near ``f_res_hz`` (a rise just
+    below, a fall above) and is kept at low frequency; a delay changes only the phase.
+    Returns the RMS magnitude change (dB) within an octave of ``f_res_hz`` and below half
+    of it, and the RMS phase change (deg) within the octave.
+    """
+    f = np.asarray(freqs_hz, float)
+    r = np.asarray(ratio, complex)
+    mag = 20 * np.log10(np.maximum(np.abs(r), 1e-300))
+    ph = np.degrees(np.unwrap(np.angle(r)))
+    near = (f >= f_res_hz / 2) & (f <= 2 * f_res_hz)
+    low = f < f_res_hz / 2
+
+    def rms(v: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(v ** 2))) if v.size else float("nan")
+
+    return {"resonance_hz": float(f_res_hz), "magnitude_near_resonance_rms_db": rms(mag[near]),
+            "magnitude_low_rms_db": rms(mag[low]), "phase_near_resonance_rms_deg": rms(ph[near])}
+
+
+def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    best, best_cost = None, np.inf
+    for mu in (-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.6, 1.0, 2.0):
+        base = _with(effects, EffectFit("load_mass", "model", (mu, 1.0)))
+        # kappa enters linearly when nothing nonlinear is downstream: y_new = kappa * y_lin + rest
+        cols, rhs = [], []
+        for ri, rec in enumerate(pipe.prep.records):
+            if rec.train.any():
+                st = pipe.stages(base, ri)
+                cols.append(st["y_lin"][rec.train])
+                rhs.append((rec.y - st["y"] + st["y_lin"])[rec.train])
+        a, b = np.concatenate(cols), np.concatenate(rhs)
+        kappa = float(np.clip(np.einsum("i,i->", a, b) / max(sumsq(a), 1e-300), 0.05, 20.0))
+        fit = EffectFit("load_mass", "model", (mu, kappa))
+        c = _sse(pipe, _with(effects, fit))
+        if c < best_cost:
+            best, best_cost = fit, c
+    assert best is not None
+    fit = _refine(pipe, effects, best, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
+                  x_scale=np.array([0.1, 0.1]))
+    # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
+    # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
+    # kept when it lowers the training BIC (one more parameter, noise variance unknown)
+    r = pipe.residuals(_with(effects, fit), "train")
+    if r.size > 1 and r.mean() < 0 and abs(fit.theta[0]) >= LOAD_SAG_MIN_MU:
+        sag = EffectFit("load_mass", "model:sag", fit.theta + (float(r.mean()),))
+        lo, hi = FAMILY.bounds(pipe, sag)
+        sag = _refine(pipe, effects, sag, lo, hi, max_nfev=15, x_scale=np.array([0.1, 0.1, 0.1 * pipe.y_s]))
+        s0, s1 = sumsq(r), _sse(pipe, _with(effects, sag))
+        if abs(sag.theta[0]) >= LOAD_SAG_MIN_MU and s1 > 0 and r.size * math.log(s0 / s1) > math.log(r.size):
+            return sag
+    return fit
+
+
+
+class LoadFamily(EffectFamily):
+    """The ``load_mass`` family (see the module's docstring)."""
+
+    name = "load_mass"
+    slot = "dynamics"
+    variants = ("model",)
+    truth_class = LoadMass
+
+    def param_names(self, fit: EffectFit) -> tuple[str, ...]:
+        """``("mass_ratio", "gain_factor"[, "offset"])``."""
+        return ("mass_ratio", "gain_factor", "offset")[:len(fit.theta)]
+
+    def transform(self, num, den, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """The linear model ``num/den`` with the load: heavier resonances, gain ``kappa``."""
+        mu, kappa = fit.theta[:2]
+        return np.asarray(num, float) * kappa, loaded_den(den, mu)
+
+    def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LinearStage:
+        """The loaded linear model ``scales.num/den`` (the nominal) with its gain and sag."""
+        num, den = getattr(scales, "num"), getattr(scales, "den")
+        return LinearStage(num, loaded_den(den, fit.theta[0]), dt_s, gain=fit.theta[1],
+                           offset=fit.theta[2] if len(fit.theta) > 2 else 0.0)
+
+    def truth_stage(self, effect: Effect, dt_s: float) -> SagStage:
+        """The sag (the heavier resonances are :meth:`LoadMass.loaded_den` of the plant's model)."""
+        assert isinstance(effect, LoadMass)
+        return SagStage(effect.sag_mm)
+
+    def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+        """Grid of ``mu`` with ``kappa`` by least squares, refined; a sag kept when the BIC says so."""
+        return _fit_load(ctx, effects)
+
+    def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
+        """Bounded refinement from ``init`` (no grid)."""
+        lo, hi = self.bounds(ctx, init)
+        return _refine(ctx, effects, init, lo, hi, max_nfev=10)
+
+    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """``-0.8 <= mu <= 10``, ``0.05 <= kappa <= 20``, ``sag <= 0``."""
+        if fit.n_params > 2:
+            return np.array([-0.8, 0.05, -np.inf]), np.array([10.0, 20.0, 0.0])
+        return np.array([-0.8, 0.05]), np.array([10.0, 20.0])
+
+    def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
+                 effects: dict[str, EffectFit]) -> dict:
+        """Mass ratio, gain factor, the resonance's factor and the sag (output unit)."""
+        th = fit.theta
+        out: dict = {"variant": fit.variant, "mass_ratio": th[0], "gain_factor": th[1],
+                     "resonance_factor": 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")}
+        if len(th) > 2:
+            out["offset"] = th[2]
+            out["offset_unit"] = units[1]
+            out["offset_note"] = "a static offset beside the changed dynamics: the load's weight compresses"
+        return out
+
+
+FAMILY = LoadFamily()

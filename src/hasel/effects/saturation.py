@@ -1,0 +1,278 @@
+"""``saturation``: a hard limit of the voltage, of its rate, or of the stroke.
+
+Forms
+-----
+- truth :class:`Saturation`: ``"amplifier"`` clips the command to ``+-limit_kv`` before
+  the output filter (:class:`ClipStage`, both ends); ``"stroke"`` bends the stroke over
+  into ``limit_mm`` with a smooth knee (:class:`SoftLimitStage`).
+- generic ``input:upper|lower`` / ``output:upper|lower`` (``theta = (limit,)``): a clip of
+  the input or of the output; ``measured:upper|lower|both`` (``(limit,)`` or
+  ``(lower, upper)``): the measured range where the output piles up, applied last;
+  ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`).
+
+Signature: a clip piles samples on one value (:func:`pile_up`); a curve bends the whole
+range without any pile-up.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
+from hasel.effects.fitkit import _fit_scalar, _sse, _with, fit_log_scalar, rate_grid
+from hasel.effects.operators import rate_limited, rate_step
+from hasel.errors import BadInputError
+from hasel.validate import positive
+
+__all__ = ["Saturation", "ClipStage", "SlewStage", "SoftLimitStage", "clip", "slew_limit", "measured_clip",
+           "pile_up", "SaturationFamily", "FAMILY"]
+
+
+def _choice(rng: np.random.Generator, options: tuple[str, ...]) -> str:
+    return options[int(rng.integers(len(options)))]
+
+
+@dataclass(frozen=True)
+class Saturation(Effect):
+    """A hard limit: the amplifier's output voltage or the actuator's full stroke.
+
+    Attributes
+    ----------
+    kind : {"amplifier", "stroke"}
+        ``"amplifier"``: the command is clipped to ``[-limit_kv, limit_kv]`` before the
+        output filter. ``"stroke"``: the stroke bends over into ``limit_mm`` with a
+        smooth knee of width ``knee_mm`` (the pouches fully zipped).
+    limit_kv : float
+        Amplifier limit, kV.
+    limit_mm : float
+        Full stroke, mm.
+    knee_mm : float
+        Width of the stroke limit's knee, mm.
+    """
+
+    name: ClassVar[str] = "saturation"
+    kind: str = "amplifier"
+    limit_kv: float = 6.0
+    limit_mm: float = 8.0
+    knee_mm: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("amplifier", "stroke"):
+            raise BadInputError(f"saturation kind must be 'amplifier' or 'stroke', got {self.kind!r}")
+        positive("limit_kv", self.limit_kv)
+        positive("limit_mm", self.limit_mm)
+        positive("knee_mm", self.knee_mm)
+
+    def clip_stroke(self, z_mm: np.ndarray) -> np.ndarray:
+        """Stroke (mm) after the smooth full-stroke limit."""
+        z = np.asarray(z_mm, float)
+        w = self.knee_mm
+        return z - w * np.logaddexp(0.0, (z - self.limit_mm) / w)
+
+    @classmethod
+    def sample_params(cls, rng: np.random.Generator) -> "Saturation":
+        kind = _choice(rng, ("amplifier", "stroke"))
+        return cls(kind=kind, limit_kv=float(rng.uniform(5.2, 6.3)), limit_mm=float(rng.uniform(6.5, 8.0)),
+                   knee_mm=float(rng.uniform(0.02, 0.15)))
+
+
+def clip(x: np.ndarray, f: EffectFit) -> np.ndarray:
+    """``x`` clipped as the generic fit ``f`` says (variant ending ``upper``, ``lower`` or ``both``)."""
+    if f.variant.endswith("both"):
+        return np.clip(x, f.theta[0], f.theta[1])
+    return np.minimum(x, f.theta[0]) if f.variant.endswith("upper") else np.maximum(x, f.theta[0])
+
+
+def slew_limit(x: np.ndarray, rate: float, dt: float, x0: float | None = None) -> np.ndarray:
+    """``x`` followed at a speed of at most ``rate`` (units of ``x`` per second).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        The command, sampled every ``dt`` seconds.
+    rate : float
+        Slew limit, units of ``x`` per second (> 0; ``inf``: no limit).
+    dt : float
+        Sample interval, s.
+    x0 : float, optional
+        State before the first sample (default ``x[0]``: settled).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``y_k = y_{k-1} + clip(x_k - y_{k-1}, -rate dt, rate dt)``.
+    """
+    step = rate_step(rate, dt)
+    return rate_limited(x, step, step, x0)
+
+
+class ClipStage:
+    """A memoryless clip (the generic fit ``f``'s ends); :meth:`run` needs no state."""
+
+    def __init__(self, f: EffectFit) -> None:
+        self.f = f
+
+    def reset(self, x0: float) -> None:
+        """Nothing to remember."""
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """``x`` clipped."""
+        return clip(np.asarray(x, float), self.f)
+
+
+class SoftLimitStage:
+    """The truth form's smooth full-stroke limit (memoryless)."""
+
+    def __init__(self, sat: Saturation) -> None:
+        self.sat = sat
+
+    def reset(self, x0: float) -> None:
+        """Nothing to remember."""
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Stroke (mm) after the limit."""
+        return self.sat.clip_stroke(x)
+
+
+class SlewStage:
+    """A slew-rate limit of ``rate`` (units per second) at ``dt_s``, carrying the last output."""
+
+    def __init__(self, rate: float, dt_s: float) -> None:
+        self.rate, self.dt_s = float(rate), float(dt_s)
+        self.y: float | None = None
+
+    def reset(self, x0: float) -> None:
+        """Settled at ``x0``."""
+        self.y = float(x0)
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """The next samples, rate-limited."""
+        x = np.asarray(x, float)
+        if x.size == 0:
+            return x.copy()
+        y = slew_limit(x, self.rate, self.dt_s, self.y)
+        self.y = float(y[-1])
+        return y
+
+
+def measured_clip(clips: dict[str, float]) -> EffectFit | None:
+    """The clip of the measured range at ``clips`` (``{"upper"|"lower": value}``), as a saturation
+    acting last in the chain (variant ``measured:upper|lower|both``), or ``None`` for no ends."""
+    if not clips:
+        return None
+    if len(clips) == 2:
+        return EffectFit("saturation", "measured:both", (float(clips["lower"]), float(clips["upper"])))
+    (end, v), = clips.items()
+    return EffectFit("saturation", f"measured:{end}", (float(v),))
+
+
+def pile_up(y: np.ndarray, tol_share: float = 1e-3) -> dict:
+    """How many samples sit on each extreme of ``y`` (within ``tol_share`` of its range).
+
+    A clip piles samples on one value; a curve (a sensor's, a map's) bends the range
+    without piling: a share of a few per cent at an end is a clip's signature, of a few
+    samples none. Returns ``{"upper": share, "lower": share}`` (shares of all samples).
+    """
+    y = np.asarray(y, float)
+    if y.size == 0:
+        return {"upper": 0.0, "lower": 0.0}
+    lo, hi = float(y.min()), float(y.max())
+    tol = tol_share * max(hi - lo, 1e-300)
+    return {"upper": float(np.mean(y >= hi - tol)), "lower": float(np.mean(y <= lo + tol))}
+
+
+class SaturationFamily(EffectFamily):
+    """The ``saturation`` family (see the module's docstring)."""
+
+    name = "saturation"
+    slot = "input"
+    variants = ("input", "output", "measured", "slew")
+    truth_class = Saturation
+
+    def param_names(self, fit: EffectFit) -> tuple[str, ...]:
+        """``("slew_rate",)``, ``("lower", "upper")`` or ``("limit",)``."""
+        if fit.variant == "slew":
+            return ("slew_rate",)
+        if fit.variant.endswith("both"):
+            return ("lower", "upper")
+        return (fit.variant.split(":")[-1],)
+
+    def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> ClipStage | SlewStage:
+        """A :class:`SlewStage` for ``slew``, else a :class:`ClipStage`."""
+        return SlewStage(fit.theta[0], dt_s) if fit.variant == "slew" else ClipStage(fit)
+
+    def truth_stage(self, effect: Effect, dt_s: float) -> ClipStage | SoftLimitStage:
+        """Amplifier: a clip of the command to ``+-limit_kv``; stroke: the smooth limit."""
+        assert isinstance(effect, Saturation)
+        if effect.kind == "amplifier":
+            return ClipStage(EffectFit("saturation", "input:both", (-effect.limit_kv, effect.limit_kv)))
+        return SoftLimitStage(effect)
+
+    def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+        """Best of a clip at either end of the input or the output (grids on their quantiles) and a slew limit."""
+        return _fit_saturation(ctx, effects)
+
+    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """A slew limit is positive; a clip's limits are free."""
+        if fit.variant == "slew":
+            return np.array([1e-12]), np.array([np.inf])
+        inf = np.full(fit.n_params, np.inf)
+        return -inf, inf
+
+    def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
+                 effects: dict[str, EffectFit]) -> dict:
+        """Side, limits and unit (or the slew rate in input units per second)."""
+        ui, uo = units
+        th = fit.theta
+        out: dict = {"variant": fit.variant}
+        if fit.variant == "slew":
+            out["acts_on"] = "input"
+            out["slew_rate_limit"] = th[0]
+            out["unit"] = f"{ui}/s" if ui else "input units/s"
+            out["form"] = "x_k = x_(k-1) + clip(u_k - x_(k-1), -S dt, S dt): the input moves at most S per second"
+            return out
+        side, end = fit.variant.split(":")
+        out["acts_on"] = "output" if side == "measured" else side
+        out["unit"] = ui if side == "input" else uo
+        if end == "both":
+            out["lower"], out["upper"] = th[0], th[1]
+        else:
+            out["upper" if end == "upper" else "lower"] = th[0]
+        if side == "measured":
+            out["measured_range"] = True
+            out["note"] = "the measured output piles up on these values: applied last, to what is measured"
+        return out
+
+    def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
+        """Share of the measured samples piled on each extreme (:func:`pile_up`)."""
+        return {"pile_up": pile_up(np.concatenate([r.y for r in ctx.prep.records]))}
+
+
+def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    best, best_cost = None, np.inf
+    st = [pipe.stages(effects, ri) for ri in range(len(pipe.prep.records))]
+    xs = np.concatenate([s["x_sat"] for s in st])
+    ys = np.concatenate([s["y_drift"] for s in st])
+    qs = np.array([0.6, 0.75, 0.85, 0.92, 0.96, 0.98, 0.99, 0.995])
+    for side, sig in (("input", xs), ("output", ys)):
+        for end in ("upper", "lower"):
+            variant = f"{side}:{end}"
+            grid = np.unique(np.quantile(sig, qs if end == "upper" else 1.0 - qs))
+            fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)), grid)
+            if fit is None:
+                continue
+            c = _sse(pipe, _with(effects, fit))
+            if c < best_cost:
+                best, best_cost = fit, c
+    # a slew-rate limit of the input: the gap only where the input moves faster than the limit
+    grid = rate_grid(st[0]["x_delay"], pipe.prep.dt_s)
+    rate, c = fit_log_scalar(lambda v: _sse(pipe, _with(effects, EffectFit("saturation", "slew", (v,)))), grid)
+    if c < best_cost:
+        best, best_cost = EffectFit("saturation", "slew", (rate,)), c
+    return best
+
+
+
+FAMILY = SaturationFamily()
