@@ -128,8 +128,13 @@ def _nominal_tf(effects) -> tuple[np.ndarray, np.ndarray]:
 def build_chain(fs: float, effects, convention="zoh", offset_frac=0.0, v0=0.0, y0=0.0,
                 m: int | None = None) -> pl.Chain:
     """The plant chain for a list of (name, form, params) effects."""
+    closed = m == 1
     if m is None:
-        m = 1 if convention == "zoh" and not offset_frac else max(4, int(round(10000 / fs)))
+        # A finer grid for other hold conventions, timing offsets and dead times that
+        # are not whole samples; plain zero-order hold needs none.
+        fine = convention != "zoh" or offset_frac or any(
+            n == "time_delay" and f == "transport" for n, f, _ in effects)
+        m = max(4, int(round(10000 / fs))) if fine else 1
     dt = 1.0 / (fs * m)
     num, den = _nominal_tf(effects)
     pre, post, ndel = [], [], 0
@@ -187,7 +192,7 @@ def build_chain(fs: float, effects, convention="zoh", offset_frac=0.0, v0=0.0, y
                 pre.append(pl.Play(p["radii"], p["weights"], v0, up_scale=p["up_scale"]))
             elif form == "duhem":
                 pre.append(pl.Duhem(p["alpha"], p["scale_kv"], v0))
-    lin = pl.Linear(num, den, dt)
+    lin = pl.Linear(num, den, dt, mode="sos" if closed else "fir")
     return pl.Chain(fs=fs, m=m, lin=lin, delay=pl.Delay(ndel, v0), pre=pre, post=post,
                     convention=convention, offset_fine=int(round(offset_frac * m)))
 
@@ -412,7 +417,7 @@ def corpus(rng, quick=False) -> list[Case]:
     # Single effects: two or more forms per name.
     i = 0
     for name, forms in FORMS.items():
-        for j in range(2):
+        for j in range(min(3, len(forms))):
             fs = rates[(i + 3) % len(rates)]
             C.append(Case(f"single{i:02d}_{name}", "diagnose", "single", fs, fmt_for(fs, i),
                           dtrain(kinds[i % len(kinds)], fs, i), dheld(i), [_eff(name, j)],

@@ -58,13 +58,33 @@ class Stage:
 
 class Linear(Stage):
     """A continuous transfer function integrated exactly for piecewise-constant input
-    on a grid of step `dt` s (zero-order-hold discretisation, second-order sections)."""
+    on a grid of step `dt` s (zero-order-hold discretisation).
 
-    def __init__(self, num, den, dt: float):
+    mode 'fir' (open loop, any dt): the discrete impulse response (Markov parameters
+    C A^(k-1) B, over `memory_s` seconds) convolved with the whole input history;
+    exact for any grid. mode 'sos' (closed loop, chunks of a few samples): second-order
+    sections with carried state; accurate only for dt >= 0.5 ms (the sections lose
+    precision when the poles crowd near z = 1), so it refuses finer grids.
+    """
+
+    def __init__(self, num, den, dt: float, mode: str = "fir", memory_s: float = 2.5):
         A, B, C, D = signal.tf2ss(num, den)
         Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), dt, method="zoh")
+        self.mode = mode
+        if mode == "fir":
+            n = int(np.ceil(memory_s / dt))
+            h = np.zeros(n)
+            x = Bd[:, 0].copy()
+            c = Cd[0]
+            for k in range(1, n):
+                h[k] = c @ x
+                x = Ad @ x
+            self.h = h
+            self.hist = np.zeros(0)
+            return
+        if dt < 5e-4:
+            raise ValueError("sos mode is inaccurate below 0.5 ms steps; use mode='fir'")
         z, p, k = signal.ss2zpk(Ad, Bd, Cd, Dd)
-        # Drop spurious zeros at infinity produced by the numerics.
         z = z[np.isfinite(z)]
         self.sos = signal.zpk2sos(z, p, k)
         self.zi = np.zeros((self.sos.shape[0], 2))
@@ -73,6 +93,11 @@ class Linear(Stage):
         self.lag = Delay(len(p) - len(z))
 
     def run(self, x):
+        x = np.asarray(x, float)
+        if self.mode == "fir":
+            self.hist = np.concatenate([self.hist, x])
+            y = signal.fftconvolve(self.hist, self.h)[: self.hist.size]
+            return y[self.hist.size - x.size:]
         y, self.zi = signal.sosfilt(self.sos, x, zi=self.zi)
         return self.lag.run(y)
 

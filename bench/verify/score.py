@@ -33,11 +33,11 @@ QUICK = ["free00", "free03", "single00", "single09", "near00", "pair00", "triple
 FLAG_WORDS = ("worse", "generalis", "generaliz", "flag")
 
 
-def run_case(hasel: str, corpus: Path, lab: dict, outdir: Path, timeout: float) -> dict:
-    """Run the CLI on one case; returns exit code, seconds, stderr's last line, JSON."""
+def run_case(hasel: str, corpus: Path, lab: dict, outdir: Path, timeout: float, reuse: bool = False) -> dict:
+    """Run the CLI on one case; returns exit code, seconds, stderr's last line, JSON.
+    With `reuse`, a case already run (its .meta.json exists) is read back instead."""
     cdir = corpus / "cases" / lab["id"]
     out_json = outdir / f"{lab['id']}.json"
-    out_json.unlink(missing_ok=True)
     args = lab["train"]["args"]
     if lab["kind"] == "ident":
         cmd = [hasel, "identify", lab["train"]["file"], "--json", str(out_json)] + args
@@ -45,6 +45,13 @@ def run_case(hasel: str, corpus: Path, lab: dict, outdir: Path, timeout: float) 
         cmd = [hasel, "diagnose", lab["train"]["file"], "--model", "model.json", "--json", str(out_json)] + args
         if "heldout" in lab:
             cmd += ["--heldout", lab["heldout"]["file"]]
+    meta = outdir / f"{lab['id']}.meta.json"
+    if reuse and meta.exists():
+        res = json.loads(meta.read_text())
+        if out_json.exists():
+            res["out"] = json.loads(out_json.read_text())
+        return res
+    out_json.unlink(missing_ok=True)
     t0 = time.monotonic()
     try:
         p = subprocess.run(cmd, cwd=cdir, capture_output=True, text=True, timeout=timeout)
@@ -58,6 +65,7 @@ def run_case(hasel: str, corpus: Path, lab: dict, outdir: Path, timeout: float) 
     last = next((ln for ln in reversed(lines) if "Error" in ln or "error" in ln), lines[-1] if lines else "")
     res = {"id": lab["id"], "rc": rc, "seconds": round(dt, 2), "stderr_last": last[:300],
            "traceback": "Traceback" in err, "cmd": " ".join(cmd)}
+    meta.write_text(json.dumps(res))
     if out_json.exists():
         try:
             res["out"] = json.loads(out_json.read_text())
@@ -299,6 +307,7 @@ def main(argv=None) -> int:
     ap.add_argument("--hasel", default=str(HERE.parents[1] / ".venv" / "bin" / "hasel"))
     ap.add_argument("--timeout", type=float, default=180.0)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--reuse", action="store_true", help="read back cases already run instead of running them")
     a = ap.parse_args(argv)
     corpus = Path(a.corpus).resolve()
     labels = {p.stem: json.loads(p.read_text()) for p in sorted((corpus / "labels").glob("*.json"))}
@@ -314,7 +323,7 @@ def main(argv=None) -> int:
     hasel = str(Path(a.hasel).resolve())
 
     def one(i):
-        r = run_case(hasel, corpus, labels[i], outdir, a.timeout)
+        r = run_case(hasel, corpus, labels[i], outdir, a.timeout, a.reuse)
         print(f"{i:60s} rc={r['rc']} {r['seconds']:6.1f} s", file=sys.stderr, flush=True)
         return r
 
