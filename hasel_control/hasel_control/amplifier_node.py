@@ -25,8 +25,8 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Watchdog
 from hasel.faults import Notice
-from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, run_node, to_stamp, topic_qos,
-                               validate_with)
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, from_stamp, run_node, to_stamp,
+                               topic_qos, validate_with)
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 __all__ = ["HvAmplifierNode", "main"]
@@ -99,11 +99,12 @@ class HvAmplifierNode(Node):
                                                                      out.reason)
         msg.header.stamp = stamp
         self.applied_pub.publish(msg)
-        self._report(notice)
+        self._report(notice, stamp)
 
-    def _report(self, notice: Notice | None) -> None:
+    def _report(self, notice: Notice | None, stamp) -> None:
+        """A diagnostic stamped like the message it is about."""
         if notice is not None:
-            self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, notice.t_s,
+            self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, from_stamp(stamp),
                                              **notice.values))
 
     def on_command(self, msg: VoltageCommand) -> None:
@@ -121,7 +122,7 @@ class HvAmplifierNode(Node):
         applied, notice = self.core.batch(self._now(), msg.voltage_kv)
         self.batch_pub.publish(SampleBatch(header=msg.header, sample_period_s=msg.sample_period_s,
                                            voltage_kv=float64_array(applied)))
-        self._report(notice)
+        self._report(notice, msg.header.stamp)
 
     def on_precondition(self, msg: VoltageCommand) -> None:
         """The deliberate charge reversal (bounded to [-2, 0] kV)."""
