@@ -283,11 +283,12 @@ NODES = {
 }
 
 
-@_settings(8)
+@_settings(5)
 @given(data=st.data())
 def test_nodes_refuse_bad_parameters_in_one_line(data):
     exe = data.draw(st.sampled_from(sorted(NODES)), label="node")
-    params = data.draw(st.dictionaries(st.sampled_from(sorted(NODES[exe])), st.just(None), max_size=3), label="p")
+    params = data.draw(st.dictionaries(st.sampled_from(sorted(NODES[exe])), st.just(None), min_size=1, max_size=3),
+                       label="p")
     args = []
     for name in params:
         args += ["-p", f"{name}:={data.draw(st.sampled_from(NODES[exe][name]), label=name)}"]
@@ -295,7 +296,7 @@ def test_nodes_refuse_bad_parameters_in_one_line(data):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         try:
-            _, err = proc.communicate(timeout=4.0)
+            _, err = proc.communicate(timeout=5.0)
             stopped = False
         except subprocess.TimeoutExpired:  # it started: stop it as a script would
             proc.send_signal(signal.SIGTERM)
@@ -305,7 +306,9 @@ def test_nodes_refuse_bad_parameters_in_one_line(data):
         proc.kill()
     TRIED[f"node {Path(exe).name} exit {proc.returncode}"] += 1
     where = f"{exe} {' '.join(args)}\n{err}"
-    assert proc.returncode in ((0, 1, 2, 128 + signal.SIGTERM) if stopped else (0, 1, 2)), where
+    # stopped by us: rclpy's handler ends it with 0; a process still starting up (before any
+    # handler, nothing commanded yet) ends by the signal itself
+    assert proc.returncode in ((0, 1, 2, 128 + signal.SIGTERM, -signal.SIGTERM) if stopped else (0, 1, 2)), where
     assert "Traceback" not in err, where
     if proc.returncode == 2:
         assert len([ln for ln in err.strip().splitlines() if ln.startswith("error")]) == 1, where
