@@ -52,6 +52,13 @@ CORE_CASES = [
     ["diagnose", "{d}/nan.csv", "--model", "{d}/model.json", "--json", "{d}/v.json"],
     ["frobnicate"],
     ["identify"],
+    ["identify", "{d}/backwards.csv", "--input", "0", "--output", "0"],
+    ["identify", "{d}/backwards.csv", "--input", "voltage_kv", "--output", "voltage_kv"],
+    ["diagnose", "{d}/nan.csv", "--model", "{d}/not.mcap"],
+    ["identify", "{d}/nan.csv", "--json", "{d}/exists.mcap"],
+    ["info", "{d}/not.mcap", "--json", "{d}/model.json"],
+    ["salvage", "{d}/not.mcap", "{d}/exists.mcap"],
+    ["identify", "{d}/nan.csv", "--json", "/proc/nope/model.json"],
 ]
 
 
@@ -62,8 +69,9 @@ def test_core_commands_in_process(argv, files, capsys):
         rc = hasel_main(args)
         assert rc == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) >= 1 and "Traceback" not in "\n".join(err)
+    assert len(err) == 1 and "Traceback" not in "\n".join(err)  # the error alone: no progress line before it
     assert err[-1].startswith("hasel") and "error" in err[-1]
+    assert (files / "exists.mcap").read_bytes() == b"" and (files / "model.json").read_text() == '{"num": [1.0]}'
 
 
 class _nothing:
@@ -85,6 +93,19 @@ ROS_CASES = [
     ["replay", "{d}/missing.mcap"],
     ["replay", "{d}/not.mcap"],
     ["replay", "{d}/exists.mcap", "--remap", "a-b"],
+    ["replay", "{d}/model.json", "--rate", "0"],
+    ["replay", "{d}/exists.mcap", "--wait=-1"],
+    ["steps", "--seed", "-1"],
+    ["steps", "--seed", "99999999999"],
+    ["calibrate", "--seed", "-1"],
+    ["chirp", "--seed", "-1"],
+    ["calibrate", "--out", "/proc/nope.yaml"],
+    ["chirp", "--offsets=-3"],
+    ["chirp", "--f1", "6000"],
+    ["chirp", "--f1", "3000", "--chirp", "paper"],
+    ["steps", "--sequence", "2,-1"],
+    ["steps", "--record", "{d}/exists.mcap"],
+    ["chirp", "--out", "{d}/exists.mcap"],
 ]
 
 
@@ -97,3 +118,45 @@ def test_ros_commands_as_a_user_runs_them(argv, files):
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
     assert len([line for line in err if "error" in line]) == 1 and err[-1].startswith("hasel")
+    assert (files / "exists.mcap").read_bytes() == b"", "an existing output was touched"
+
+
+def test_a_reference_beyond_reach_is_run_with_a_warning_naming_the_limit(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "HASEL_ROS_ENV_READY"}
+    out = subprocess.run([HASEL, "steps", "--sequence", "2,50", "--hold", "0.2"], capture_output=True, text=True,
+                         timeout=120, env=env, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    warning = [line for line in out.stderr.splitlines() if "warning" in line]
+    assert len(warning) == 1 and "12.2 mm" in warning[0] and "9 kV" in warning[0]
+    assert "9.000 kV" in out.stdout  # saturated at the ceiling, not above
+
+
+@pytest.mark.parametrize("exe,param", [("hasel_control/lib/hasel_control/hv_amplifier", "v_max_kv:=12.0"),
+                                       ("sim_plant/lib/sim_plant/plant", "period_s:=0.0"),
+                                       ("sim_plant/lib/sim_plant/plant", "seed:=-1")])
+def test_a_node_refuses_a_bad_start_parameter_in_one_line(exe, param):
+    env = {k: v for k, v in os.environ.items() if k != "HASEL_ROS_ENV_READY"}
+    out = subprocess.run([HASEL, "env", "--", str(ROOT / "install" / exe), "--ros-args", "-p", param],
+                         capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert "Traceback" not in out.stderr and len(lines) == 1
+    assert param.split(":=")[0] in lines[0]
+
+
+def test_outputs_honour_the_umask_all_alike(files, tmp_path, capsys):
+    old = os.umask(0o027)
+    try:
+        assert hasel_main(["info", str(files / "not.mcap"), "--json", str(tmp_path / "i.json")]) == 2
+        t = np.arange(0, 20, 1e-3)
+        u = 2 + np.sin(2 * np.pi * (0.1 + 0.5 * t) * t)
+        y = np.convolve(u, np.exp(-np.arange(50) / 10) / 10)[:t.size]
+        np.savetxt(tmp_path / "d.csv", np.column_stack([t, u, y]), delimiter=",",
+                   header="t_s,voltage_kv,stroke_mm", comments="")
+        assert hasel_main(["identify", str(tmp_path / "d.csv"), "--json", str(tmp_path / "m.json"),
+                           "--plot", str(tmp_path / "b.png")]) == 0
+    finally:
+        os.umask(old)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir() if p.name != "d.csv"}
+    assert modes == {"i.json": 0o640, "m.json": 0o640, "b.png": 0o640}
+    capsys.readouterr()

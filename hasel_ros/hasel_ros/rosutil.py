@@ -203,6 +203,11 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     except (BadInputError, ParameterException) as err:  # a start-up error is one line, not a traceback
         sys.stderr.write(f"error: {err}\n")
         return 2
+    except Exception as err:  # noqa: BLE001 - a signal during start-up invalidates the context
+        if not rclpy.ok():
+            return 0  # stopped (SIGINT/SIGTERM/SIGHUP) before the node was up: nothing was commanded
+        sys.stderr.write(f"error: {type(err).__name__}: {err}\n")
+        return 1
     finally:
         if node is not None:
             shutdown = getattr(node, "on_shutdown", None)

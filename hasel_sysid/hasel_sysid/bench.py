@@ -521,6 +521,11 @@ def _fig8(b: _Bench) -> None:
           "0 (only DataFileError/BadInputError)", r["crashed"] == 0)
     b.row("8 loader fuzzing: peak memory", f"{r['peak_rss_mib']:.0f} MiB (+{r['rss_growth_mib']:.0f})", "-", None,
           f"< {r['mem_limit_mib']} MiB limit", 0 < r["peak_rss_mib"] < r["mem_limit_mib"])
+    from hasel_sysid.bench_fuzz import run_cli_fuzz  # every subcommand and node (issue 17)
+
+    c = b.results["8_cli_fuzz"] = run_cli_fuzz(1.0 if b.quick else 4.0, progress=b.say)
+    b.row("8 CLI fuzzing: cases tried", f"{c['cases']} ({c['wall_s']:.0f} s)", "-", None,
+          "exit 0/1/2, no traceback, no overwrite", c["passed"])
 
 
 _RUNNERS: dict[int, Callable[[_Bench], None]] = {1: _fig1, 2: _fig2, 3: _fig3, 4: _fig4, 5: _fig5, 6: _fig6,

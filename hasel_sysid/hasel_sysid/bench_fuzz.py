@@ -23,6 +23,7 @@ enforces the timeouts and restarts the worker after a hang.
 """
 from __future__ import annotations
 
+import json
 import os
 import resource
 import shutil
@@ -37,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["make_seeds", "mutate", "run_fuzz"]
+__all__ = ["make_seeds", "mutate", "run_fuzz", "run_cli_fuzz"]
 
 _EXAMPLES = 3  # failing inputs kept per kind of failure
 _INTERESTING = [0, 1, 0x7F, 0xFF, 0x7FFF, 0xFFFF, 0x7FFFFFFF, 0xFFFFFFFF, 2**63 - 1, 2**64 - 1, 2**32, 1 << 40]
@@ -341,6 +342,38 @@ def run_fuzz(budget_s: float, case_timeout_s: float = 5.0, seed: int = 0, mem_li
             "rejected_by_type": dict(rejected_types), "peak_rss_mib": peak_kib / 1024,
             "rss_growth_mib": growth_kib / 1024, "mem_limit_mib": mem_limit_mib, "case_timeout_s": case_timeout_s,
             "restarts": restarts, "wall_s": time.monotonic() - t0}
+
+
+
+def run_cli_fuzz(scale: float = 4.0, root: str | os.PathLike[str] | None = None, timeout_s: float = 3600.0,
+                 progress=None) -> dict[str, Any]:
+    """Run the CLI fuzzer (``test/test_cli_fuzz.py``) with ``scale`` times the cases of ``make test``.
+
+    Random argument lists for every subcommand, damaged files for every file argument
+    and random node parameters, not derandomized (new cases each run). Returns
+    ``cases`` (total tried), ``by_command`` (``"<command> exit <code>"`` -> count),
+    ``examples`` (one argument list and last stderr line per kind of ending),
+    ``passed`` (every promise kept), ``failure`` (pytest's last lines if not) and ``wall_s``.
+    """
+    say = progress or (lambda m: None)
+    # the workspace: given, or the first parent (of this installed file, then of the cwd) holding the test
+    here = [Path(root)] if root else [*Path(__file__).resolve().parents, Path.cwd(), *Path.cwd().parents]
+    base = next((p for p in here if (p / "test" / "test_cli_fuzz.py").is_file()), here[0])
+    report = Path(tempfile.mkdtemp(prefix="hasel-clifuzz-")) / "report.json"
+    env = {**os.environ, "HASEL_CLI_FUZZ_SCALE": f"{scale:g}", "HASEL_CLI_FUZZ_REPORT": str(report)}
+    env.pop("HASEL_ROS_ENV_READY", None)
+    t0 = time.monotonic()
+    say(f"CLI fuzzer: {scale:g} x the cases of make test")
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider",
+                           str(base / "test" / "test_cli_fuzz.py")], cwd=base, env=env, capture_output=True,
+                          text=True, timeout=timeout_s)
+    doc = json.loads(report.read_text()) if report.exists() else {"cases": {}, "examples": {}}
+    shutil.rmtree(report.parent, ignore_errors=True)
+    cases = sum(doc["cases"].values())
+    say(f"CLI fuzzer: {cases} cases tried, {'all promises kept' if proc.returncode == 0 else 'FAILED'}")
+    return {"cases": cases, "by_command": doc["cases"], "examples": doc["examples"], "passed": proc.returncode == 0,
+            "failure": "" if proc.returncode == 0 else "\n".join(proc.stdout.splitlines()[-40:]),
+            "wall_s": time.monotonic() - t0}
 
 
 if __name__ == "__main__":

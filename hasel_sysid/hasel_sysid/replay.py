@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import struct
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -57,7 +58,7 @@ def read_raw(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[
                 if name.count("/") == 1:  # older rosbag2 naming pkg/Type
                     name = name.replace("/", "/msg/")
                 yield RawMessage(channel.topic, name, message.data, message.log_time, message.publish_time)
-    except (McapError, ValueError, EOFError, OSError) as err:
+    except (McapError, ValueError, EOFError, OSError, struct.error, KeyError, IndexError) as err:
         raise DataFileError(f"{p}: cannot be replayed ({type(err).__name__}: {err}); "
                             f"try `hasel info {p}` and `hasel salvage`") from err
 
@@ -111,8 +112,10 @@ class Replayer:
 
 def run_replay(args: argparse.Namespace) -> int:
     """CLI: ``hasel replay FILE [--rate R] [--topics ...] [--remap FROM:=TO] [--clock]``."""
-    if args.rate < 0:
+    if not 0 <= args.rate < float("inf"):
         raise BadInputError(f"--rate must be >= 0 (0: as fast as possible), got {args.rate}")
+    if not 0 <= args.wait <= 3600:
+        raise BadInputError(f"--wait must be between 0 and 3600 s, got {args.wait}")
     remap = parse_remaps(args.remap or [])
     topics = [t for t in (args.topics or "").split(",") if t] or None
     first = next(read_raw(args.file, topics), None)  # validates the file before ROS starts

@@ -96,3 +96,26 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
     assert "not an MCAP file" in capsys.readouterr().err
     assert main(["salvage", str(junk), str(junk)]) == 2
     assert "is also an input of this command" in capsys.readouterr().err
+
+
+def test_salvage_of_a_file_whose_only_chunk_was_cut_says_so(tmp_path, capsys):
+    path = tmp_path / "one.mcap"
+    with Ros2McapWriter(path, chunk_size=1 << 20) as w:  # every message in one chunk
+        c = w.add_topic("/sensor/stroke", "hasel_msgs/msg/Stroke")
+        for i in range(50):  # 0.5 s: within one chunk
+            t = 10**9 + i * 10_000_000
+            w.write(c, encode("hasel_msgs/msg/Stroke", {"stroke_mm": float(i)}), t, t)
+    with open(path, "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert len(chunks) == 1
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:chunks[0].chunk_start_offset + chunks[0].chunk_length // 2])
+    out = tmp_path / "fixed.mcap"
+    assert main(["salvage", str(cut), str(out)]) == 2
+    captured = capsys.readouterr()
+    assert "no intact chunk was lost" not in captured.out
+    assert "1 damaged chunk lost" in captured.out and "no message could be recovered" in captured.out
+    assert captured.err.strip().startswith("hasel salvage: error: no message") and len(captured.err.splitlines()) == 1
+    with open(out, "rb") as f:  # still a valid file, with the topic and no message
+        summary = make_reader(f).get_summary()
+    assert summary.statistics.message_count == 0 and [ch.topic for ch in summary.channels.values()] == ["/sensor/stroke"]

@@ -68,15 +68,9 @@ def json_safe(obj: Any) -> Any:
 
 
 def _write_atomic(path: str, text: str) -> None:
-    target = Path(path)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".diagnose-", dir=target.parent)
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, target)
-    except OSError as err:
-        raise BadInputError(f"cannot write {target}: {err.strerror or err}") from err
+    from hasel.outputs import write_text  # atomic, mode from the umask like every output
+
+    write_text(path, text)
 
 
 def _load_model(path: str) -> dict:

@@ -63,16 +63,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _write_json(path: str, obj: dict[str, Any]) -> None:
-    target = Path(path)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".model-", suffix=".json", dir=target.parent)
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=2, allow_nan=False)
-            fh.write("\n")
-        os.replace(tmp, target)
-    except OSError as err:
-        raise BadInputError(f"cannot write {target}: {err.strerror or err}") from err
+    from hasel.outputs import write_text  # atomic, mode from the umask like every output
+
+    write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
 
 
 def _markers(data: Any) -> list[tuple[float, float, float]]:
