@@ -225,3 +225,29 @@ def test_polynomial_maps_and_hysteresis_reproduce_their_logs():
         lo, hi = fam.bounds(pipe, fit)
         assert np.all(np.asarray(fit.theta) >= lo) and np.all(np.asarray(fit.theta) <= hi)
         assert _sse(pipe, {true.name: fit}) < 1e-3 * _sse(pipe, {}), true
+
+
+def test_frequency_signature_tells_a_load_from_a_delay():
+    from hasel.effects.evidence import load_or_delay
+
+    den = paper.plant_tf()[1]
+    delay = load_or_delay(_pipe_with(EffectFit("time_delay", "input", (0.012,))), {}, den)
+    assert delay["favours"] == "time_delay"
+    assert delay["delay"]["delay_s"] == pytest.approx(0.012, rel=0.05)
+    assert delay["delay"]["magnitude_rms_db"] < 0.1
+    load = load_or_delay(_pipe_with(EffectFit("load_mass", "model", (0.6, 1.0))), {}, den)
+    assert load["favours"] == "load_mass"
+    assert load["load"]["magnitude_near_resonance_rms_db"] > 1.0
+    none = load_or_delay(_pipe_with(EffectFit("time_delay", "input", (0.0,))), {}, den)
+    assert none["favours"] == "none"
+
+
+def test_pile_up_sees_a_clip_and_not_a_curve():
+    from hasel.effects.saturation import pile_up
+
+    t = np.arange(20000) * DT
+    x = 3.0 + 2.0 * np.sin(2 * np.pi * (1.0 + 4.0 * t) * t)
+    clipped = pile_up(np.minimum(x, 4.5))
+    curved = pile_up(x + 0.05 * (x - 3.0) ** 2)
+    # a sine dwells near its peaks (under 1 % within 1e-4 of the range); the clip holds a quarter there
+    assert clipped["upper"] > 0.05 and curved["upper"] < 0.01 and curved["lower"] < 0.01

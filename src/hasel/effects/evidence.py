@@ -84,23 +84,10 @@ def load_or_delay(ctx: FitContext, effects: dict[str, EffectFit], den) -> dict:
     ld = resonance_signature(f, r, fres) if np.isfinite(fres) else {}
     near = ld.get("magnitude_near_resonance_rms_db", float("nan"))
     mag, phres, d = ph["magnitude_rms_db"], ph["phase_residual_rms_deg"], abs(ph["delay_s"])
-    half = 0.5 * ctx.prep.dt_s
     if mag < 0.5 and phres < 3.0:
-        fav = "time_delay" if d >= half else "none"
+        fav = "time_delay" if d >= 0.5 * ctx.prep.dt_s else "none"
     elif np.isfinite(near) and near > 1.0 and phres >= 3.0:
         fav = "load_mass"
-    else:
-        fav = "unclear"
-    return {"favours": "unclear", "n_bins": int(f.size)}
-    fres = resonance_hz(den)
-    ph = phase_signature(f, r)
-    ld = resonance_signature(f, r, fres) if np.isfinite(fres) else {}
-    near = ld.get("magnitude_near_resonance_rms_db", float("nan"))
-    low = ld.get("magnitude_low_rms_db", float("nan"))
-    if np.isfinite(near) and near > 1.0 and not near < 2.0 * (low if np.isfinite(low) else 0.0):
-        fav = "load_mass"
-    elif (not np.isfinite(near) or near < 0.5) and ph["phase_residual_rms_deg"] < 3.0:
-        fav = "time_delay"
     else:
         fav = "unclear"
     return {"favours": fav, "n_bins": int(f.size), "band_hz": [float(f[0]), float(f[-1])], "delay": ph, "load": ld}

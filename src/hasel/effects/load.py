@@ -205,6 +205,7 @@ class LoadFamily(EffectFamily):
     name = "load_mass"
     slot = "dynamics"
     variants = ("model",)
+    warm_start = True
     truth_class = LoadMass
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -230,11 +231,6 @@ class LoadFamily(EffectFamily):
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
         """Grid of ``mu`` with ``kappa`` by least squares, refined; a sag kept when the BIC says so."""
         return _fit_load(ctx, effects)
-
-    def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
-        """Bounded refinement from ``init`` (no grid)."""
-        lo, hi = self.bounds(ctx, init)
-        return _refine(ctx, effects, init, lo, hi, max_nfev=10)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """``-0.8 <= mu <= 10``, ``0.05 <= kappa <= 20``, ``sag <= 0``."""

@@ -111,11 +111,6 @@ class SensorFamily(EffectFamily):
         """Polynomial by least squares on the output before the sensor (degree by cross-validation)."""
         return _fit_sensor(ctx, effects)
 
-    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Free coefficients."""
-        inf = np.full(fit.n_params, np.inf)
-        return -inf, inf
-
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Coefficients, normalisation and the curve's deviation on 9 points (output unit)."""

@@ -239,11 +239,6 @@ class StaticMapFamily(EffectFamily):
         """Input and internal polynomial maps by least squares (degree by cross-validation), the better kept."""
         return _fit_static(ctx, effects)
 
-    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Free coefficients."""
-        inf = np.full(fit.n_params, np.inf)
-        return -inf, inf
-
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Coefficients, normalisation, the curve's deviation on 9 points and the offset in output units."""
