@@ -251,3 +251,17 @@ def test_pile_up_sees_a_clip_and_not_a_curve():
     curved = pile_up(x + 0.05 * (x - 3.0) ** 2)
     # a sine dwells near its peaks (under 1 % within 1e-4 of the range); the clip holds a quarter there
     assert clipped["upper"] > 0.05 and curved["upper"] < 0.01 and curved["lower"] < 0.01
+
+
+def test_bend_profile_tells_a_one_sided_flattening_from_a_curve():
+    from hasel.effects.sensor import bend_profile
+
+    w = np.linspace(-1, 1, 401)
+    soft = 0.1 * np.logaddexp(0.0, (w - 0.7) / 0.1)  # a stroke bending over into a limit near the top
+    th_soft = np.polynomial.polynomial.polyfit(w, -soft, 5)
+    th_quad = np.polynomial.polynomial.polyfit(w, 0.05 * w ** 2, 5)
+    b_soft, b_quad = bend_profile(th_soft), bend_profile(th_quad)
+    assert b_soft["one_sided"] and b_soft["upper_quarter_share"] > 0.6
+    assert not b_quad["one_sided"]
+    assert b_quad["upper_quarter_share"] == pytest.approx(0.25, abs=0.01)
+    assert b_quad["lower_quarter_share"] == pytest.approx(0.25, abs=0.01)
