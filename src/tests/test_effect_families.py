@@ -265,3 +265,12 @@ def test_bend_profile_tells_a_one_sided_flattening_from_a_curve():
     assert not b_quad["one_sided"]
     assert b_quad["upper_quarter_share"] == pytest.approx(0.25, abs=0.01)
     assert b_quad["lower_quarter_share"] == pytest.approx(0.25, abs=0.01)
+
+
+def test_map_sides_names_the_side_of_the_dynamics_a_map_acts_on():
+    from hasel.effects.static_map import map_sides
+
+    inp = map_sides(_pipe_with(EffectFit("static_nonlinearity", "input", (0.0, 0.0, 0.08))), {})
+    out = map_sides(_pipe_with(EffectFit("sensor_nonlinearity", "output", (0.0, 0.0, -0.05, 0.02))), {})
+    assert inp["best"] == "input" and inp["separable"] and inp["remaining_share"]["input"] < 1e-3
+    assert out["best"] == "sensor" and out["separable"] and out["remaining_share"]["sensor"] < 1e-3
