@@ -274,3 +274,14 @@ def test_map_sides_names_the_side_of_the_dynamics_a_map_acts_on():
     out = map_sides(_pipe_with(EffectFit("sensor_nonlinearity", "output", (0.0, 0.0, -0.05, 0.02))), {})
     assert inp["best"] == "input" and inp["separable"] and inp["remaining_share"]["input"] < 1e-3
     assert out["best"] == "sensor" and out["separable"] and out["remaining_share"]["sensor"] < 1e-3
+
+
+def test_play_support_counts_the_reversals_each_play_needs():
+    from hasel.effects.hysteresis import play_support
+
+    t = np.arange(20000) * 1e-3
+    u = 3.0 + 1.0 * np.sin(2 * np.pi * 0.5 * t)  # reversals of 2 kV
+    s = play_support(u, (0.1, 0.5, 1.5), (0.2, 0.3, 0.5))
+    assert s["reversals_over_2r"][0] >= 18 and s["reversals_over_2r"][1] >= 18 and s["reversals_over_2r"][2] == 0
+    assert s["unsupported_weight_share"] == pytest.approx(0.5)
+    assert s["largest_reversal"] == pytest.approx(2.0, rel=0.06)
