@@ -225,3 +225,63 @@ def test_polynomial_maps_and_hysteresis_reproduce_their_logs():
         lo, hi = fam.bounds(pipe, fit)
         assert np.all(np.asarray(fit.theta) >= lo) and np.all(np.asarray(fit.theta) <= hi)
         assert _sse(pipe, {true.name: fit}) < 1e-3 * _sse(pipe, {}), true
+
+
+def test_frequency_signature_tells_a_load_from_a_delay():
+    from hasel.effects.evidence import load_or_delay
+
+    den = paper.plant_tf()[1]
+    delay = load_or_delay(_pipe_with(EffectFit("time_delay", "input", (0.012,))), {}, den)
+    assert delay["favours"] == "time_delay"
+    assert delay["delay"]["delay_s"] == pytest.approx(0.012, rel=0.05)
+    assert delay["delay"]["magnitude_rms_db"] < 0.1
+    load = load_or_delay(_pipe_with(EffectFit("load_mass", "model", (0.6, 1.0))), {}, den)
+    assert load["favours"] == "load_mass"
+    assert load["load"]["magnitude_near_resonance_rms_db"] > 1.0
+    none = load_or_delay(_pipe_with(EffectFit("time_delay", "input", (0.0,))), {}, den)
+    assert none["favours"] == "none"
+
+
+def test_pile_up_sees_a_clip_and_not_a_curve():
+    from hasel.effects.saturation import pile_up
+
+    t = np.arange(20000) * DT
+    x = 3.0 + 2.0 * np.sin(2 * np.pi * (1.0 + 4.0 * t) * t)
+    clipped = pile_up(np.minimum(x, 4.5))
+    curved = pile_up(x + 0.05 * (x - 3.0) ** 2)
+    # a sine dwells near its peaks (under 1 % within 1e-4 of the range); the clip holds a quarter there
+    assert clipped["upper"] > 0.05 and curved["upper"] < 0.01 and curved["lower"] < 0.01
+
+
+def test_bend_profile_tells_a_one_sided_flattening_from_a_curve():
+    from hasel.effects.sensor import bend_profile
+
+    w = np.linspace(-1, 1, 401)
+    soft = 0.1 * np.logaddexp(0.0, (w - 0.7) / 0.1)  # a stroke bending over into a limit near the top
+    th_soft = np.polynomial.polynomial.polyfit(w, -soft, 5)
+    th_quad = np.polynomial.polynomial.polyfit(w, 0.05 * w ** 2, 5)
+    b_soft, b_quad = bend_profile(th_soft), bend_profile(th_quad)
+    assert b_soft["one_sided"] and b_soft["upper_quarter_share"] > 0.6
+    assert not b_quad["one_sided"]
+    assert b_quad["upper_quarter_share"] == pytest.approx(0.25, abs=0.01)
+    assert b_quad["lower_quarter_share"] == pytest.approx(0.25, abs=0.01)
+
+
+def test_map_sides_names_the_side_of_the_dynamics_a_map_acts_on():
+    from hasel.effects.static_map import map_sides
+
+    inp = map_sides(_pipe_with(EffectFit("static_nonlinearity", "input", (0.0, 0.0, 0.08))), {})
+    out = map_sides(_pipe_with(EffectFit("sensor_nonlinearity", "output", (0.0, 0.0, -0.05, 0.02))), {})
+    assert inp["best"] == "input" and inp["separable"] and inp["remaining_share"]["input"] < 1e-3
+    assert out["best"] == "sensor" and out["separable"] and out["remaining_share"]["sensor"] < 1e-3
+
+
+def test_play_support_counts_the_reversals_each_play_needs():
+    from hasel.effects.hysteresis import play_support
+
+    t = np.arange(20000) * 1e-3
+    u = 3.0 + 1.0 * np.sin(2 * np.pi * 0.5 * t)  # reversals of 2 kV
+    s = play_support(u, (0.1, 0.5, 1.5), (0.2, 0.3, 0.5))
+    assert s["reversals_over_2r"][0] >= 18 and s["reversals_over_2r"][1] >= 18 and s["reversals_over_2r"][2] == 0
+    assert s["unsupported_weight_share"] == pytest.approx(0.5)
+    assert s["largest_reversal"] == pytest.approx(2.0, rel=0.06)

@@ -403,7 +403,7 @@ def fit_family(pipe: Pipeline, effects: dict[str, EffectFit], name: str,
     base = {k: v for k, v in effects.items() if k != name}
     fam = _REGISTRY[name]
     try:
-        if init is not None and init.name == name and name in ("asymmetric_dynamics", "load_mass"):
+        if init is not None and init.name == name and fam.warm_start:
             return fam.refine_from(pipe, base, init)
         return fam.fit(pipe, base)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError):

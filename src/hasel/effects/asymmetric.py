@@ -193,6 +193,7 @@ class AsymmetricFamily(EffectFamily):
     name = "asymmetric_dynamics"
     slot = "output"
     variants = ("output", "rate_limit")
+    warm_start = True
     truth_class = AsymmetricDynamics
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -218,11 +219,6 @@ class AsymmetricFamily(EffectFamily):
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
         """Lag from a small grid, refined; or a speed limit in one direction, whichever fits better."""
         return _fit_asym(ctx, effects)
-
-    def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
-        """Bounded refinement from ``init`` (no grid)."""
-        lo, hi = self.bounds(ctx, init)
-        return _refine(ctx, effects, init, lo, hi, max_nfev=10)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """Speed > 0; time constants in [0, 20 t_dom], level slope in [-3, 3]."""

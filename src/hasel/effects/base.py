@@ -173,6 +173,8 @@ class EffectFamily(ABC):
     slot: ClassVar[str] = "input"
     #: Generic variants the diagnosis fits (``EffectFit.variant`` prefixes).
     variants: ClassVar[tuple[str, ...]] = ()
+    #: Whether a previous fit is a good start (a grid search can be skipped: :meth:`refine_from`).
+    warm_start: ClassVar[bool] = False
     #: The truth form's dataclass.
     truth_class: ClassVar[type[Effect]] = Effect
 
@@ -208,13 +210,20 @@ class EffectFamily(ABC):
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
         """Fit on the training samples with ``effects`` (the others) held fixed; ``None`` if it cannot."""
 
-    @abstractmethod
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of ``fit.theta`` (for refinement)."""
+        """Lower and upper bounds of ``fit.theta`` (for refinement; default: free)."""
+        inf = np.full(fit.n_params, np.inf)
+        return -inf, inf
 
     def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
-        """A warm-started fit from ``init`` (default: a fresh :meth:`fit`)."""
-        return self.fit(ctx, effects)
+        """A warm-started fit from ``init``: a bounded refinement (10 evaluations) for the families
+        with :attr:`warm_start`, else a fresh :meth:`fit`."""
+        if not self.warm_start:
+            return self.fit(ctx, effects)
+        from hasel.effects.fitkit import refine
+
+        lo, hi = self.bounds(ctx, init)
+        return refine(ctx, effects, init, lo, hi, max_nfev=10)
 
     @abstractmethod
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],

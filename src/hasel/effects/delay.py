@@ -133,4 +133,13 @@ class DelayFamily(EffectFamily):
         return {"variant": fit.variant, "delay_s": fit.theta[0]}
 
 
+    def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
+        """The measured-over-model response read as a delay and as a load, without this family in the
+        model (:func:`hasel.effects.evidence.load_or_delay`)."""
+        from hasel.effects.evidence import load_or_delay
+
+        base = {k: v for k, v in effects.items() if k != self.name}
+        return {"frequency_response": load_or_delay(ctx, base, getattr(ctx, "den"))}
+
+
 FAMILY = DelayFamily()

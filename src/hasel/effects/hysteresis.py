@@ -25,7 +25,7 @@ from hasel.effects.fitkit import _downstream_nonlinear, _fit_scalar, _ls, _refin
 from hasel.effects.operators import BoucWen, monotone_runs, play
 from hasel.validate import in_range, positive
 
-__all__ = ["Hysteresis", "HYST_THRESHOLDS", "PlayStage", "BoucWenStage", "branch", "HysteresisFamily", "FAMILY"]
+__all__ = ["Hysteresis", "HYST_THRESHOLDS", "PlayStage", "BoucWenStage", "branch", "play_support", "HysteresisFamily", "FAMILY"]
 
 #: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
 HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
@@ -200,6 +200,33 @@ class HysteresisFamily(EffectFamily):
                 "unit": units[0], "loop_half_width": float(sum(w * r for w, r in zip(th, ctx.thresholds))),
                 "initial_branch": branch(fit),
                 "initial_branch_note": "plays start at x0 + c*r: -1 rising branch, 0 centred, 1 falling branch"}
+
+    def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
+        """What the training input could show of each play (:func:`play_support`)."""
+        u = np.concatenate([r.u[r.train] for r in ctx.prep.records if r.train.any()])
+        return {"plays": play_support(u, ctx.thresholds, fit.theta[:len(HYST_THRESHOLDS)])}
+
+
+def play_support(u: np.ndarray, radii, weights) -> dict:
+    """Which plays the input ``u`` identifies: a play of half-width ``r`` only changes state on a
+    reversal of more than ``2 r``; its weight is unsupported (and may not carry to another log, e.g.
+    voltage steps of other sizes) without at least two such reversals.
+
+    Returns ``{"reversals_over_2r": [...], "unsupported_weight_share": float, "largest_reversal": float}``
+    (the share of the summed weights on plays with fewer than two such reversals).
+    """
+    u = np.asarray(u, float)
+    r_min = 0.5 * min(radii) if len(radii) else 0.0
+    path = play(u, r_min, float(u[0])) if u.size else u  # reversals larger than the smallest play's width
+    st = monotone_runs(path)
+    ends = np.concatenate([st[1:], [path.size - 1]]) if path.size else st
+    amps = np.abs(path[ends] - path[st]) if path.size else np.zeros(0)
+    counts = [int(np.sum(amps > 2.0 * r)) for r in radii]
+    w = np.asarray(weights, float)
+    tot = float(w.sum())
+    bad = float(sum(wi for wi, c in zip(w, counts) if c < 2))
+    return {"reversals_over_2r": counts, "unsupported_weight_share": bad / tot if tot > 0 else 0.0,
+            "largest_reversal": float(amps.max()) if amps.size else 0.0}
 
 
 FAMILY = HysteresisFamily()

@@ -205,6 +205,7 @@ class LoadFamily(EffectFamily):
     name = "load_mass"
     slot = "dynamics"
     variants = ("model",)
+    warm_start = True
     truth_class = LoadMass
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -231,11 +232,6 @@ class LoadFamily(EffectFamily):
         """Grid of ``mu`` with ``kappa`` by least squares, refined; a sag kept when the BIC says so."""
         return _fit_load(ctx, effects)
 
-    def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
-        """Bounded refinement from ``init`` (no grid)."""
-        lo, hi = self.bounds(ctx, init)
-        return _refine(ctx, effects, init, lo, hi, max_nfev=10)
-
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """``-0.8 <= mu <= 10``, ``0.05 <= kappa <= 20``, ``sag <= 0``."""
         if fit.n_params > 2:
@@ -253,6 +249,15 @@ class LoadFamily(EffectFamily):
             out["offset_unit"] = units[1]
             out["offset_note"] = "a static offset beside the changed dynamics: the load's weight compresses"
         return out
+
+
+    def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
+        """The measured-over-model response read as a delay and as a load, without this family in the
+        model (:func:`hasel.effects.evidence.load_or_delay`)."""
+        from hasel.effects.evidence import load_or_delay
+
+        base = {k: v for k, v in effects.items() if k != self.name}
+        return {"frequency_response": load_or_delay(ctx, base, getattr(ctx, "den"))}
 
 
 FAMILY = LoadFamily()

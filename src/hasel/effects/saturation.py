@@ -168,7 +168,7 @@ def measured_clip(clips: dict[str, float]) -> EffectFit | None:
     return EffectFit("saturation", f"measured:{end}", (float(v),))
 
 
-def pile_up(y: np.ndarray, tol_share: float = 1e-3) -> dict:
+def pile_up(y: np.ndarray, tol_share: float = 1e-4) -> dict:
     """How many samples sit on each extreme of ``y`` (within ``tol_share`` of its range).
 
     A clip piles samples on one value; a curve (a sensor's, a map's) bends the range
@@ -218,8 +218,7 @@ class SaturationFamily(EffectFamily):
         """A slew limit is positive; a clip's limits are free."""
         if fit.variant == "slew":
             return np.array([1e-12]), np.array([np.inf])
-        inf = np.full(fit.n_params, np.inf)
-        return -inf, inf
+        return super().bounds(ctx, fit)
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:

@@ -25,7 +25,7 @@ from hasel.effects.saturation import pile_up
 from hasel.effects.static_map import MapStage, describe_poly
 from hasel.validate import finite, positive
 
-__all__ = ["SensorNonlinearity", "sensor_map", "SensorFamily", "FAMILY"]
+__all__ = ["SensorNonlinearity", "sensor_map", "bend_profile", "SensorFamily", "FAMILY"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,24 @@ def _fit_sensor(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
 
 
 
+def bend_profile(theta, n: int = 201) -> dict:
+    """Where a fitted polynomial map bends: shares of its curvature (``|p''|``) in the top and bottom
+    quarters of the normalised range ``w`` in [-1, 1] (each 0.25 for an even bend).
+
+    A one-sided flattening (a limit approached smoothly: a soft stroke limit, an end stop)
+    puts most of its curvature at one end; a calibration curve (a bow, a square law)
+    spreads it over the range.
+    """
+    w = np.linspace(-1.0, 1.0, n)
+    c = np.polynomial.polynomial.polyder(np.asarray(theta, float), 2) if len(theta) > 2 else np.zeros(1)
+    k = np.abs(np.polynomial.polynomial.polyval(w, c))
+    tot = float(k.sum())
+    if tot <= 0:
+        return {"upper_quarter_share": 0.25, "lower_quarter_share": 0.25, "one_sided": False}
+    up, lo = float(k[w >= 0.5].sum() / tot), float(k[w <= -0.5].sum() / tot)
+    return {"upper_quarter_share": up, "lower_quarter_share": lo, "one_sided": max(up, lo) > 0.6}
+
+
 class SensorFamily(EffectFamily):
     """The ``sensor_nonlinearity`` family (see the module's docstring)."""
 
@@ -111,19 +129,16 @@ class SensorFamily(EffectFamily):
         """Polynomial by least squares on the output before the sensor (degree by cross-validation)."""
         return _fit_sensor(ctx, effects)
 
-    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Free coefficients."""
-        inf = np.full(fit.n_params, np.inf)
-        return -inf, inf
-
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Coefficients, normalisation and the curve's deviation on 9 points (output unit)."""
         return describe_poly(ctx, fit, units)
 
     def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
-        """Share of the measured samples piled on each extreme (a curve piles none)."""
-        return {"pile_up": pile_up(np.concatenate([r.y for r in ctx.prep.records]))}
+        """Share of the measured samples piled on each extreme (a curve piles none), and where the fitted
+        curve bends (:func:`bend_profile`: one-sided like a soft limit, or over the whole range)."""
+        return {"pile_up": pile_up(np.concatenate([r.y for r in ctx.prep.records])),
+                "bend": bend_profile(fit.theta)}
 
 
 FAMILY = SensorFamily()

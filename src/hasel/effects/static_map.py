@@ -28,13 +28,18 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "InternalMapStage", "max_degree", "linear_static", "NEAR_LINEAR_SHARE",
+__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "map_sides", "InternalMapStage", "max_degree", "linear_static", "NEAR_LINEAR_SHARE",
            "StaticMapFamily", "FAMILY"]
 
 #: A static map whose curvature (its deviation from its best line) removes less than this share
 #: of what the map removes beyond its offset is a linear correction (a gain, a changed dynamic):
 #: only its offset is kept.
 NEAR_LINEAR_SHARE = 0.1
+#: A side of the dynamics is told apart when the runner-up side leaves this many times the best's
+#: remaining error: set on the tuning corpus (``python -m hasel.othersim``, seed 0), where the four
+#: single-map cases (knee and power input maps, exponential and quadratic sensor curves) gave
+#: 1.40-2.45 with the right side best, and the map-plus-another-effect pairs 1.03-1.14.
+SIDES_SEPARABLE = 1.3
 
 
 @dataclass(frozen=True)
@@ -149,18 +154,27 @@ def max_degree(u: np.ndarray, u_s: float) -> int:
     return int(max(1, min(STATIC_DEGREE, levels.size - 1)))
 
 
+def fit_variant(pipe: FitContext, effects: dict[str, EffectFit], variant: str) -> EffectFit:
+    """The polynomial map ``variant`` (``"input"`` or ``"internal"``) fitted with ``effects`` fixed: least
+    squares (degree by cross-validation), only its offset if it is nearly a line, refined where a
+    nonlinear stage downstream keeps least squares from being exact."""
+    slot = SLOT_ORDER[f"static_nonlinearity:{variant}"]
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    basis = _static_basis(pipe, base, variant)
+    th = _poly_ls(pipe, base, basis)
+    if th.size > 1 and _nearly_linear(pipe, base, variant, basis, th):
+        th = _poly_ls(pipe, base, basis, degrees=(0,))
+    fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
+    if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
+        fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
+    return fit
+
+
 def _fit_static(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best, best_cost = None, np.inf
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     for variant in ("input", "internal"):
-        slot = SLOT_ORDER[f"static_nonlinearity:{variant}"]
-        base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
-        basis = _static_basis(pipe, base, variant)
-        th = _poly_ls(pipe, base, basis)
-        if th.size > 1 and _nearly_linear(pipe, base, variant, basis, th):
-            th = _poly_ls(pipe, base, basis, degrees=(0,))
-        fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
-        if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
-            fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
+        fit = fit_variant(pipe, effects, variant)
         c = _sse(pipe, _with(base, fit))
         if c < best_cost:
             best, best_cost = fit, c
@@ -239,11 +253,6 @@ class StaticMapFamily(EffectFamily):
         """Input and internal polynomial maps by least squares (degree by cross-validation), the better kept."""
         return _fit_static(ctx, effects)
 
-    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Free coefficients."""
-        inf = np.full(fit.n_params, np.inf)
-        return -inf, inf
-
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Coefficients, normalisation, the curve's deviation on 9 points and the offset in output units."""
@@ -252,6 +261,30 @@ class StaticMapFamily(EffectFamily):
         out["output_offset_at_centre"] = float(g0 * (ctx.u_s if fit.variant == "input" else ctx.y_s) * fit.theta[0])
         out["output_offset_unit"] = units[1]
         return out
+
+    def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
+        """Which side of the dynamics the map acts on, as far as the data tell (:func:`map_sides`)."""
+        return {"sides": map_sides(ctx, effects)}
+
+
+def map_sides(ctx: FitContext, effects: dict[str, EffectFit]) -> dict:
+    """How well a map explains the gap on each side of the dynamics: the training sum of squares with
+    the input map, the internal map and the sensor curve (each alone beside ``effects``) over that
+    without any, the best side, and the runner-up's ratio to it (near 1: the data cannot tell the
+    sides apart; another amplitude or band would)."""
+    from hasel.effects.registry import family
+
+    base = {k: v for k, v in effects.items() if k not in ("static_nonlinearity", "sensor_nonlinearity")}
+    s0 = _sse(ctx, base)
+    cands = {v: fit_variant(ctx, base, v) for v in ("input", "internal")}
+    sens = family("sensor_nonlinearity").fit(ctx, base)
+    if sens is not None:
+        cands["sensor"] = sens
+    share = {k: _sse(ctx, _with(base, f)) / max(s0, 1e-300) for k, f in cands.items()}
+    order = sorted(share, key=share.get)
+    runner = share[order[1]] / max(share[order[0]], 1e-300) if len(order) > 1 else float("inf")
+    return {"remaining_share": share, "best": order[0], "runner_up": order[1] if len(order) > 1 else None,
+            "runner_up_over_best": runner, "separable": runner > SIDES_SEPARABLE}
 
 
 def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
