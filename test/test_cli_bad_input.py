@@ -160,3 +160,12 @@ def test_outputs_honour_the_umask_all_alike(files, tmp_path, capsys):
     modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir() if p.name != "d.csv"}
     assert modes == {"i.json": 0o640, "m.json": 0o640, "b.png": 0o640}
     capsys.readouterr()
+
+
+def test_debug_shows_the_traceback_that_users_do_not_see(files, capsys):
+    args = ["diagnose", str(files / "nan.csv"), "--model", str(files / "not.mcap")]
+    assert hasel_main(args) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    assert hasel_main(["--debug", *args]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and err.strip().splitlines()[-1].startswith("hasel diagnose: error: --model")

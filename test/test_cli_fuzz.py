@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 
 from hasel.cli import main as hasel_main
 from hasel_sysid.bench_fuzz import make_seeds, mutate
-from test_signals import recorded_kv
+from test_stop_signals import recorded_kv
 
 ROOT = Path(__file__).resolve().parents[1]
 HASEL = str(ROOT / ".venv" / "bin" / "hasel")

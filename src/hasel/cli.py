@@ -291,7 +291,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         sys.stderr = held.stream
         interrupt.restore(previous)
-        held.release(keep_last_only=code == 2)
+        held.release(keep_last_only=code == 2 and not debug)
     return code
 
 if __name__ == "__main__":
