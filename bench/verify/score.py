@@ -63,6 +63,8 @@ def run_case(hasel: str, corpus: Path, lab: dict, outdir: Path, timeout: float, 
     lines = [ln for ln in err.splitlines() if ln.strip()]
     # The line that matters: a traceback's last line, an error line, or the last line.
     last = next((ln for ln in reversed(lines) if "Error" in ln or "error" in ln), lines[-1] if lines else "")
+    if rc == "timeout":
+        last = f"timeout after {timeout:.0f} s (last stderr line: {last[:150]})"
     res = {"id": lab["id"], "rc": rc, "seconds": round(dt, 2), "stderr_last": last[:300],
            "traceback": "Traceback" in err, "cmd": " ".join(cmd)}
     meta.write_text(json.dumps(res))
@@ -283,6 +285,14 @@ def print_tables(s: dict) -> str:
         ot = d["offset_test"]
         L.append(f"offset-dependence test on LTI logs: rejected at p<0.05 in {ot['rejected_at_0.05']}/{ot['n']} "
                  f"(false rejection rate {_f(ot['false_rejection_rate'], '{:.0%}')})")
+        L.append("| design @ rate | n | within 1 dB/5 deg | worst dB | worst deg | exit codes | usable |")
+        L.append("|---|---|---|---|---|---|---|")
+        for k, v in d["by_design"].items():
+            db = [x for x in v["err_db"] if x is not None]
+            dg = [x for x in v["err_deg"] if x is not None]
+            L.append(f"| {k} | {v['n']} | {v['ok']} | {_f(max(db) if db else None)} | "
+                     f"{_f(max(dg) if dg else None, '{:.1f}')} | {_count(v['rc'])} | {_count(v['usable'])} |")
+        L.append("")
         L.append("| case | design | fs | fmt | precond | settle | rc | usable | dB | deg | dB/deg w/o delay | G(0) | p | s |")
         L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in d["cases"]:
