@@ -27,6 +27,7 @@ poles.
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -394,7 +395,9 @@ def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pi
         if np.max(np.abs(np.imag(L))) > 1e-6 * max(np.max(np.abs(L)), 1.0):
             return None
         Ac, Bc = np.real(L[:n, :n]), np.real(L[:n, n:])
-        num, den = signal.ss2tf(Ac, Bc, C, D)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # ss2tf warns of tiny leading numerator terms; they are trimmed
+            num, den = signal.ss2tf(Ac, Bc, C, D)
     except (ValueError, np.linalg.LinAlgError):
         return None
     num = np.trim_zeros(np.atleast_1d(num[0]), "f")
