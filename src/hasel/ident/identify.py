@@ -522,14 +522,14 @@ def _frequency_responses(segs: list[Segment], t: np.ndarray, uu: np.ndarray, yy:
         if band[0] > 0 and seg_s < 2.0 / band[0]:
             raise BadInputError(f"the log is too short for the band asked: the longest operating point lasts "
                                 f"{seg_s:.3g} s, a band from {band[0]:g} Hz needs at least {2.0 / band[0]:.3g} s")
-    elif longest.source == "whole log":
-        # steps and levels: their spectrum falls as 1/f^2 above the switching rate; the band is where the
-        # input's derivative (flat for steps) carries power
-        band = excited_band(np.diff(uu[longest.i0:longest.i1]), rate)
-        band = (0.0, band[1])
     else:
-        # -20 dB: a sweep's slow start holds much power in few lines, the rest is still well excited
-        band = excited_band(uu[longest.i0:longest.i1], rate, rel_level=0.01)
+        # low edge from the input (-20 dB: a sweep's slow start holds much power in few lines); top edge from
+        # its derivative, whose spectrum is flat for steps and levels (theirs falls as 1/f^2 above the
+        # switching rate, yet is well excited there)
+        x = uu[longest.i0:longest.i1]
+        lo_b = excited_band(x, rate, rel_level=0.01)
+        hi_b = excited_band(np.diff(x), rate, rel_level=0.01)
+        band = (0.0 if longest.source == "whole log" else lo_b[0], max(lo_b[1], hi_b[1]))
     if band[0] >= rate / 2:
         raise BadInputError(f"the band {band[0]:g}-{band[1]:g} Hz lies above the Nyquist frequency {rate / 2:g} Hz")
     band = (band[0], min(band[1], rate / 2))
@@ -844,7 +844,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         else:
             stale += 1
         best = min(best, score)
-        if stale >= 3:
+        if stale >= 2:
             break
     if not candidates:
         raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")

@@ -385,7 +385,9 @@ def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pi
     a = np.concatenate([[1.0], theta[:n]])
     b = np.concatenate([[0.0], theta[n:2 * n]])
     try:
-        A, B, C, D = signal.tf2ss(b, a)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # tf2ss/ss2tf warn of tiny leading numerator terms; they are trimmed
+            A, B, C, D = signal.tf2ss(b, a)
         dt = 1.0 / rate_hz
         big = np.zeros((n + 1, n + 1))
         big[:n, :n] = A
