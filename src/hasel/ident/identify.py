@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from hasel.errors import BadInputError
-from hasel.ident.dependence import DependenceTest, offset_dependence
+from hasel.ident.dependence import DependenceTest, ResidualDependence, offset_dependence, residual_dependence
 from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_ratio, log_bin, pool, welch_h1,
                                   welch_plan)
 from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
@@ -651,6 +651,28 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
     return oe
 
 
+def _with_residual_test(dep: DependenceTest, rd: ResidualDependence) -> DependenceTest:
+    """The dependence verdict with the p-value of the calibrated residual test (spreads kept from the responses)."""
+    if rd.p_value >= dep.alpha:
+        verdict = "independent"
+    elif math.isfinite(dep.spread_db) and dep.spread_db <= dep.tol_db and dep.spread_deg <= dep.tol_deg:
+        verdict = "weakly_dependent"
+    else:
+        verdict = "dependent"
+    gains = ", ".join(f"{100 * c[0]:+.2g} %" for c in rd.coefficients)
+    summary = (f"{verdict.replace('_', ' ')}: per-operating-point gain corrections of the common model {gains}; "
+               f"p = {rd.p_value:.3g} (residual test: operating point against sub-block variability)")
+    if math.isfinite(dep.spread_db):
+        summary += f"; the responses differ by {dep.spread_db:.2g} dB and {dep.spread_deg:.2g} deg"
+    return replace(dep, verdict=verdict, summary=summary, chi2=rd.chi2, dof=rd.dof, p_value=rd.p_value,
+                   reduced_chi2=rd.chi2 / rd.dof,
+                   per_offset=[{**(dep.per_offset[k] if k < len(dep.per_offset) else {}),
+                                "gain_correction": c[0], "lag_correction_s": c[1],
+                                "gain_correction_se": se[0], "lag_correction_se_s": se[1]}
+                               for k, (c, se) in enumerate(zip(rd.coefficients, rd.std_errors))],
+                   method="residual", assumptions=rd.assumptions)
+
+
 def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float, float]] | None = None,
              options: IdentOptions | None = None, input_name: str = "input", output_name: str = "output",
              input_unit: str | None = None, output_unit: str | None = None,
@@ -880,6 +902,11 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     if hold > 0 and math.isfinite(oe.nrmse_heldout):
         validation = Validation(compare_fit_pct=100.0 * (1.0 - oe.nrmse_heldout), nrmse=oe.nrmse_heldout,
                                 per_segment_pct=per_pct, holdout_fraction=hold)
+    # the calibrated dependence test: residuals of the one model, operating point by operating point
+    if not local and len(segs) >= 2 and segs[0].source != "whole log":
+        rd = residual_dependence(yd_all, oe.y_hat, [(s.i0 // M, s.i1 // M) for s in segs], fs)
+        if rd is not None:
+            dep = _with_residual_test(dep, rd)
     check = check_model(model, band_hz=band, static_slope=slope0 if math.isfinite(slope0) else None,
                         static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
                         min_compare_fit_pct=opts.min_compare_fit_pct)
