@@ -47,7 +47,7 @@ def test_the_reported_paper_chirp_failure_is_gone():
 
 def test_checks_flag_a_model_that_contradicts_the_data():
     """The core check used by identify (and offered to diagnose) names each failure with a fix."""
-    bad = TFModel(np.array([1.0, -5.0]), np.array([1.0, 0.02, 1.6]))   # RHP zero, near-marginal 0.2 Hz pair
+    bad = TFModel(np.array([1.0, -5.0]), np.array([1.0, 0.01, 1.6]))   # RHP zero, near-marginal 0.2 Hz pair (damping 0.004)
     chk = check_model(bad, band_hz=(1.0, 20.0), static_slope=1.35, static_ci=0.01, heldout_nrmse=1.5)
     assert not chk.usable
     text = " ".join(chk.reasons)
