@@ -81,7 +81,7 @@ def _damping(r: np.ndarray) -> np.ndarray:
 
 def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope: float | None = None,
                 static_ci: float | None = None, heldout_nrmse: float | None = None,
-                min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT) -> ModelCheck:
+                min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT, rhp_zeros_shown: bool = False) -> ModelCheck:
     """Run the checks of this module on a continuous transfer function.
 
     Parameters
@@ -98,6 +98,9 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
         NRMSE of the model's simulation on held-out data.
     min_compare_fit_pct : float
         Threshold of the held-out compare fit, percent.
+    rhp_zeros_shown : bool
+        The held-out data showed that the right-half-plane zeros are needed (their
+        mirror image fits worse): they are not held against the model.
 
     Returns
     -------
@@ -135,7 +138,7 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
             if kind == "pole":
                 light = light[np.real(light) < 0]
                 light = light[_damping(light) >= MARGINAL_DAMPING]
-            rhp = roots[out & (np.real(roots) > 0)] if kind == "zero" else np.zeros(0)
+            rhp = roots[out & (np.real(roots) > 0)] if kind == "zero" and not rhp_zeros_shown else np.zeros(0)
             for r in list(light[np.imag(light) >= 0]):
                 reasons.append(f"lightly damped {kind} pair at {hz(r):.3g} Hz (damping "
                                f"{float(_damping(np.array([r]))[0]):.2g}) outside the excited band {band_txt}")
