@@ -80,3 +80,11 @@ def test_cli_exits_1_with_usable_false_on_a_log_that_cannot_be_identified(tmp_pa
     assert "model not usable" in last and "to fix" in last and "Traceback" not in p.stderr
     m = json.loads(out.read_text())
     assert m["usable"] is False and m["reasons"]
+
+
+def test_a_log_too_short_for_the_band_asked_is_one_clear_error():
+    from hasel.errors import BadInputError
+
+    log = designs.make_log("multisine", 200.0, seed=2, offsets_kv=(3.0,))
+    with pytest.raises(BadInputError, match="too short for the band asked"):
+        identify(log.t_s, log.u_kv, log.y_mm, band_hz=(0.01, 10.0))
