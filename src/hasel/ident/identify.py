@@ -862,7 +862,8 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             continue
         pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0)
                for m in starts]
-        best_start = starts[int(np.argmin([p.nrmse_estimate for p in pre]))]
+        pre_cost = np.array([p.nrmse_estimate for p in pre], float)
+        best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
         oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
                     max_nfev=opts.oe_max_nfev)
         score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
@@ -881,7 +882,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             break
     if not candidates:
         raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")
-    ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12]
+    ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12] or candidates
     nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
     oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)

@@ -104,6 +104,8 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
 
 
 def _sim_modal(num: np.ndarray, den: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))) or den[0] == 0:
+        return np.full(u.shape, np.nan)   # a diverged parameter set: its residual is rejected by the caller
     den = den / den[0]
     num = num / den[0] if num.size else num
     n_p = den.size - 1
