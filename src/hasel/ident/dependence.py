@@ -292,8 +292,9 @@ def residual_dependence(y: np.ndarray, y_hat: np.ndarray, pieces: Sequence[tuple
     ``(K - 1, (K - 1)(B - 1))`` degrees of freedom. ``chi2`` reports ``(K - 1) F`` of
     the smaller p-value. See :data:`RESIDUAL_TEST_ASSUMPTIONS`.
     """
-    n_min = min((i1 - i0 for i0, i1 in pieces), default=0)
-    use = [(i0, i1) for i0, i1 in pieces if i1 - i0 >= 0.5 * n_min and i1 - i0 >= 40 * sub_blocks]
+    # only operating points of one length compare like with like (same excitation at the same sub-block)
+    n_med = float(np.median([i1 - i0 for i0, i1 in pieces])) if len(pieces) else 0.0
+    use = [(i0, i1) for i0, i1 in pieces if abs((i1 - i0) - n_med) <= 0.1 * n_med and i1 - i0 >= 40 * sub_blocks]
     K, B = len(use), sub_blocks
     if K < 2:
         return None
