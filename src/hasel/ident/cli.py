@@ -114,4 +114,8 @@ def run(args: argparse.Namespace) -> int:
         say(f"wrote {path}")
     for line in result.summary_lines():
         print(line)
+    if not result.usable:
+        # the JSON is written (with "usable": false and the reasons); the exit code says not to rely on it
+        sys.stderr.write(f"hasel identify: {result.check.one_line()}\n")
+        return 1
     return 0

@@ -36,7 +36,8 @@ from scipy import stats
 from hasel.errors import BadInputError
 from hasel.ident.freqresp import FreqResp
 
-__all__ = ["DependenceTest", "offset_dependence", "VERDICTS"]
+__all__ = ["DependenceTest", "offset_dependence", "VERDICTS", "ResidualDependence", "residual_dependence",
+           "RESIDUAL_TEST_ASSUMPTIONS"]
 
 #: Possible values of :attr:`DependenceTest.verdict`.
 VERDICTS = ("independent", "weakly_dependent", "dependent", "untestable")
@@ -94,6 +95,9 @@ class DependenceTest:
     tol_db: float = 1.0
     tol_deg: float = 5.0
     coherence_min: float = 0.9
+    method: str = "frequency_response"
+    assumptions: str = ("chi-square of the operating points' responses against their weighted mean, "
+                        "with the estimates' own standard deviations; every thin-th coherent bin")
 
     def to_json(self) -> dict:
         """JSON-ready dict (non-finite numbers become None)."""
@@ -201,3 +205,114 @@ def offset_dependence(responses: Sequence[FreqResp], *, coherence_min: float = 0
         summary = (f"dependent: the dynamics change with the operating point over {span} ({nums})")
     return DependenceTest(verdict, summary, chi2, dof, p, chi2 / dof, max_db, max_deg, spread_db, spread_deg,
                           (f_lo, f_hi), int(N), offsets, per, alpha, tol_db, tol_deg, coherence_min)
+
+
+@dataclass(frozen=True)
+class ResidualDependence:
+    """Result of :func:`residual_dependence`: do the operating points leave different model errors?
+
+    Attributes
+    ----------
+    chi2, dof, p_value : float, int, float
+        ``(K - 1) F`` of the two-way analysis of variance (see :func:`residual_dependence`),
+        its numerator degrees of freedom ``K - 1``, and the Bonferroni p-value.
+    coefficients : list of (float, float)
+        Per operating point: relative gain correction and lag correction (s) of the
+        common model that fits its residual best.
+    std_errors : list of (float, float)
+        Their standard errors from the sub-blocks' spread.
+    ar_order : int
+        0 (no noise model: the error estimate is the observed sub-block variability).
+    assumptions : str
+        What the p-value relies on.
+    """
+
+    chi2: float
+    dof: int
+    p_value: float
+    coefficients: list[tuple[float, float]]
+    std_errors: list[tuple[float, float]]
+    ar_order: int
+    assumptions: str
+
+
+#: What :func:`residual_dependence` assumes (reported in the JSON and the summary).
+RESIDUAL_TEST_ASSUMPTIONS = (
+    "one linear model fitted to the whole log (its simulation runs through every transient, so start-up "
+    "transients are not in the residual); each operating point is cut into 4 equal sub-blocks and the "
+    "residual of each is regressed on the model's response and its derivative (a local gain and lag "
+    "correction); a two-way analysis of variance (operating point x sub-block, no replication) tests the "
+    "operating-point effect against the interaction, so the error estimate is the observed block-to-block "
+    "variability (it holds for coloured noise, correlated samples and leakage alike) and model error shared "
+    "by the points at the same position in their excitation cancels in the sub-block effect; assumes the "
+    "sub-block estimates are independent with equal variance; gain and lag p-values combined by Bonferroni")
+
+
+def _anova_rows(C: np.ndarray) -> tuple[float, int, int, float]:
+    """Two-way ANOVA without replication on ``C[k, b]``: F of the row effect, its dofs and p-value."""
+    K, B = C.shape
+    grand = C.mean()
+    rows = C.mean(axis=1, keepdims=True)
+    cols = C.mean(axis=0, keepdims=True)
+    ss_rows = B * float(np.sum((rows - grand) ** 2))
+    ss_res = float(np.sum((C - rows - cols + grand) ** 2))
+    d1, d2 = K - 1, (K - 1) * (B - 1)
+    if ss_res <= 0:
+        return float("inf"), d1, d2, 0.0
+    F = (ss_rows / d1) / (ss_res / d2)
+    return F, d1, d2, float(stats.f.sf(F, d1, d2))
+
+
+def residual_dependence(y: np.ndarray, y_hat: np.ndarray, pieces: Sequence[tuple[int, int]], rate_hz: float, *,
+                        sub_blocks: int = 4) -> ResidualDependence | None:
+    """A calibrated test of offset dependence from the time-domain residual of one common model.
+
+    Parameters
+    ----------
+    y, y_hat : ndarray, shape (n,)
+        Measured output and the common model's simulation over the whole log.
+    pieces : sequence of (int, int)
+        Sample ranges of the operating points.
+    rate_hz : float
+        Sample rate of ``y``, Hz.
+    sub_blocks : int
+        Sub-blocks per operating point.
+
+    Returns
+    -------
+    ResidualDependence or None
+        None with fewer than two usable operating points.
+
+    Notes
+    -----
+    In sub-block ``b`` of operating point ``k``, with ``x1`` the model response about
+    its mean and ``x2 = dx1/dt``: ``y - y_hat = c1 x1 - c2 x2 + const + e`` (``c1`` a
+    relative gain change, ``c2`` a lag, s). For ``c1`` and ``c2`` separately, the
+    operating-point effect of ``c[k, b]`` is F-tested against the interaction with
+    ``(K - 1, (K - 1)(B - 1))`` degrees of freedom. ``chi2`` reports ``(K - 1) F`` of
+    the smaller p-value. See :data:`RESIDUAL_TEST_ASSUMPTIONS`.
+    """
+    # only operating points of one length compare like with like (same excitation at the same sub-block)
+    n_med = float(np.median([i1 - i0 for i0, i1 in pieces])) if len(pieces) else 0.0
+    use = [(i0, i1) for i0, i1 in pieces if abs((i1 - i0) - n_med) <= 0.1 * n_med and i1 - i0 >= 40 * sub_blocks]
+    K, B = len(use), sub_blocks
+    if K < 2:
+        return None
+    C = np.zeros((2, K, B))
+    for k, (i0, i1) in enumerate(use):
+        edges = np.linspace(i0, i1, B + 1).astype(int)
+        for b in range(B):
+            a0, a1 = edges[b], edges[b + 1]
+            x1 = y_hat[a0:a1] - np.mean(y_hat[a0:a1])
+            x2 = -np.gradient(x1) * rate_hz
+            r = y[a0:a1] - y_hat[a0:a1]
+            X = np.column_stack([x1, x2, np.ones(x1.size)])
+            c = np.linalg.lstsq(X, r, rcond=None)[0]
+            C[:, k, b] = c[:2]
+    res = [_anova_rows(C[j]) for j in range(2)]
+    p = min(1.0, 2.0 * min(r[3] for r in res))
+    j = int(np.argmin([r[3] for r in res]))
+    F, d1, d2, _ = res[j]
+    coefs = [(float(C[0, k].mean()), float(C[1, k].mean())) for k in range(K)]
+    ses = [(float(C[0, k].std(ddof=1) / np.sqrt(B)), float(C[1, k].std(ddof=1) / np.sqrt(B))) for k in range(K)]
+    return ResidualDependence(float(F * d1), int(d1), p, coefs, ses, 0, RESIDUAL_TEST_ASSUMPTIONS)

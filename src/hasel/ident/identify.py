@@ -42,13 +42,15 @@ from typing import Any
 import numpy as np
 
 from hasel.errors import BadInputError
-from hasel.ident.dependence import DependenceTest, offset_dependence
+from hasel.ident.dependence import DependenceTest, ResidualDependence, offset_dependence, residual_dependence
 from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_ratio, log_bin, pool, welch_h1,
                                   welch_plan)
 from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
 from hasel.ident.staticmap import StaticMap, fit_static_map
-from hasel.ident.tffit import TFFit, fit_tf, fit_tf_order
-from hasel.ident.validation import compare_fit, simulate
+from hasel.ident.checks import ModelCheck, check_model
+from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
+from hasel.ident.timefit import arx_start, interleaved, oe_fit
+from hasel.ident.validation import compare_fit
 
 __all__ = ["IdentOptions", "OperatingPoint", "Validation", "IdentResult", "identify", "unit_from_name",
            "check_signals"]
@@ -102,6 +104,14 @@ class IdentOptions:
         Leave out operating points whose output sits at its largest or smallest
         value in 1 % or more of the samples (a saturated sensor, e.g. the laser's
         ADC at full scale): clipping is not the plant's dynamics.
+    input_hold : {"zoh", "centred"}
+        Sampling convention of the input: held until the next sample (a DAC, a
+        controller's command, this project's plant) or an instantaneous reading.
+    oe_max_nfev : int
+        Budget of the output-error refinement per candidate order.
+    min_compare_fit_pct : float
+        Held-out compare fit below which the model is not usable (see
+        :mod:`hasel.ident.checks`).
     """
 
     band_hz: tuple[float, float] | None = None
@@ -121,6 +131,9 @@ class IdentOptions:
     tol_db: float = 1.0
     tol_deg: float = 5.0
     exclude_clipped: bool = True
+    input_hold: str = "zoh"
+    oe_max_nfev: int = 40
+    min_compare_fit_pct: float = 80.0
 
 
 @dataclass(frozen=True)
@@ -245,6 +258,18 @@ class IdentResult:
     options: IdentOptions
     notes: list[str] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
+    check: ModelCheck | None = None
+    static_slope_ci: float | None = None
+
+    @property
+    def usable(self) -> bool:
+        """True if the model passed its own checks (:mod:`hasel.ident.checks`)."""
+        return self.check is None or self.check.usable
+
+    @property
+    def reasons(self) -> list[str]:
+        """Why the model is not usable (empty when it is)."""
+        return [] if self.check is None else list(self.check.reasons)
 
     @property
     def model(self):
@@ -277,6 +302,7 @@ class IdentResult:
             lines.append(f"held-out time-domain fit (compare): {self.validation.compare_fit_pct:.1f} % "
                          f"(NRMSE {self.validation.nrmse:.3g})")
         lines.append(f"offset dependence: {self.dependence.summary}")
+        lines.append("usable: yes" if self.usable else f"usable: NO ({'; '.join(self.reasons)})")
         return lines
 
     def paper_comparison(self, f_lo_hz: float = 0.1, f_hi_hz: float = 15.0) -> dict[str, float]:
@@ -327,8 +353,9 @@ class IdentResult:
             "signals": {"input": self.input_name, "output": self.output_name},
             "frequency_band_hz": [float(self.fit.band_hz[0]), float(self.fit.band_hz[1])],
             "fit": {
-                "method": "Sanathanan-Koerner start, then weighted log-error least squares; stable poles; "
-                          "order chosen on held-out frequencies",
+                "method": "frequency-domain start (Sanathanan-Koerner, weighted log-error least squares, static "
+                          "gain anchored to the static map), then output-error refinement on the whole log's "
+                          "interleaved estimation blocks; order chosen on the held-out blocks",
                 "cost": fin(self.fit.cost), "rms_db": fin(self.fit.rms_db), "max_db": fin(self.fit.max_db),
                 "rms_deg": fin(self.fit.rms_deg), "max_deg": fin(self.fit.max_deg),
                 "fit_percent": fin(self.fit.fit_percent),
@@ -350,6 +377,11 @@ class IdentResult:
             "sample_rate_hz": float(self.rate_hz),
             "analysis_rate_hz": float(self.analysis_rate_hz),
             "notes": list(self.notes),
+            "usable": self.usable,
+            "reasons": self.reasons,
+            "fixes": [] if self.check is None else list(self.check.fixes),
+            "checks": None if self.check is None else self.check.to_json(),
+            "input_hold": self.options.input_hold,
             "tool": "hasel identify",
             "version": hasel.__version__,
         }
@@ -454,6 +486,199 @@ def _blocks(x: np.ndarray, m: int) -> np.ndarray:
     return x[: n * m].reshape(n, m).mean(axis=1) if m > 1 else x
 
 
+@dataclass
+class _FR:
+    """Per-operating-point frequency responses and what they were computed with."""
+
+    band: tuple[float, float]
+    fs: float
+    M: int
+    h1s: list[FreqResp]
+    ffts: list[FreqResp]
+    periods: list[float | None]
+    means: list[tuple[float, float]]
+    periodic: bool
+    estimator: str
+
+
+def _hold_correction(resp: FreqResp, dt_s: float, hold: str) -> FreqResp:
+    """Divide out the sampling convention: a zero-order hold of the input lags by half a sample and has a sinc."""
+    if hold != "zoh":
+        return resp
+    f = resp.f_hz
+    zoh = np.sinc(f * dt_s) * np.exp(-1j * np.pi * f * dt_s)
+    return replace(resp, H=resp.H / zoh, sigma=resp.sigma / np.abs(zoh))
+
+
+def _frequency_responses(segs: list[Segment], t: np.ndarray, uu: np.ndarray, yy: np.ndarray, rate: float,
+                         opts: IdentOptions, notes: list[str]) -> _FR:
+    """FFT ratio and Welch H1 of every operating point on one grid (whole operating points, raw rate 1/dt)."""
+    longest = max(segs, key=lambda s: s.i1 - s.i0)
+    if opts.band_hz is not None:
+        band = (float(opts.band_hz[0]), float(opts.band_hz[1]))
+        if not (0 <= band[0] < band[1]):
+            raise BadInputError(f"band_hz must be (low, high) with 0 <= low < high, got {opts.band_hz}")
+        seg_s = (longest.i1 - longest.i0) / rate
+        if band[0] > 0 and seg_s < 2.0 / band[0]:
+            raise BadInputError(f"the log is too short for the band asked: the longest operating point lasts "
+                                f"{seg_s:.3g} s, a band from {band[0]:g} Hz needs at least {2.0 / band[0]:.3g} s")
+    else:
+        # low edge from the input (-20 dB: a sweep's slow start holds much power in few lines); top edge from
+        # its derivative, whose spectrum is flat for steps and levels (theirs falls as 1/f^2 above the
+        # switching rate, yet is well excited there)
+        x = uu[longest.i0:longest.i1]
+        lo_b = excited_band(x, rate, rel_level=0.01)
+        hi_b = excited_band(np.diff(x), rate, rel_level=0.01)
+        band = (0.0 if longest.source == "whole log" else lo_b[0], max(lo_b[1], hi_b[1]))
+    if band[0] >= rate / 2:
+        raise BadInputError(f"the band {band[0]:g}-{band[1]:g} Hz lies above the Nyquist frequency {rate / 2:g} Hz")
+    band = (band[0], min(band[1], rate / 2))
+    target = opts.analysis_rate_hz if opts.analysis_rate_hz is not None else 20.0 * band[1]
+    M = max(1, int(rate // target))
+    fs = rate / M
+    dec = [(_blocks(uu[s.i0:s.i1], M), _blocks(yy[s.i0:s.i1], M)) for s in segs]
+    n_min = min(ud.size for ud, _ in dec)
+    try:
+        plan = welch_plan(n_min, fs, band, bins_per_octave=opts.bins_per_octave, min_averages=opts.min_averages)
+    except BadInputError as err:
+        raise BadInputError(f"the operating points are too short for the band {band[0]:.3g}-{band[1]:.3g} Hz: "
+                            f"{err}") from err
+    band_lines = band
+    band = (max(band[0], 2 * fs / plan[0].nperseg), band[1])
+    h1s: list[FreqResp] = []
+    periods: list[float | None] = []
+    means: list[tuple[float, float]] = []
+    for s, (ud, yd) in zip(segs, dec):
+        h1s.append(_hold_correction(welch_h1(ud, yd, fs, plan=plan, band_hz=band), 1.0 / rate, opts.input_hold))
+        p_d = detect_period(ud, fs, min_period_s=4.0 / band[1])
+        periods.append(None if p_d is None else _refine_period(uu[s.i0:s.i1], p_d * rate) / rate)
+        # the static-map point from the last half: far from the step into the operating point (whose slow
+        # tail would bias the mean output low, more so after larger steps)
+        means.append((float(np.mean(ud[ud.size // 2:])), float(np.mean(yd[yd.size // 2:]))))
+    n_per = [None if p is None else int(round(p * rate)) for p in periods]
+    periodic = all(n is not None and 2 * n <= ud.size * M for n, (ud, _) in zip(n_per, dec)) and \
+        len(set(n_per)) == 1
+    ffts: list[FreqResp] = []
+    for s, (ud, _), p in zip(segs, dec, periods):
+        n_raw = ud.size * M
+        ffts.append(_hold_correction(
+            fft_ratio(uu[s.i0:s.i0 + n_raw], yy[s.i0:s.i0 + n_raw], rate, band_hz=band_lines if periodic else band,
+                      period_s=p if periodic else None), 1.0 / rate, opts.input_hold))
+    if periodic:
+        notes.append(f"periodic input (period {n_per[0] / rate:.6g} s): the frequency-domain start and the "
+                     "dependence test use the leakage-free FFT ratio over whole periods")
+    return _FR(band, fs, M, h1s, ffts, periods, means, periodic, "periodic_fft" if periodic else "welch_h1")
+
+
+def _static_map(segs: list[Segment], means: list[tuple[float, float]], t: np.ndarray, uu: np.ndarray,
+                yy: np.ndarray, rate: float, notes: list[str]) -> tuple[StaticMap, float | None, float | None]:
+    """The static map, the slope of the straight line through its points and that slope's standard error.
+
+    The slope and its error are None with fewer than three points.
+
+    With two or more operating points, their means. Otherwise (steps, random levels, a
+    closed loop) the means over the last half of every stretch where the input holds
+    still for at least 0.2 s; failing that, means over 2 s windows.
+    """
+    xs = np.array([m[0] for m in means])
+    ys = np.array([m[1] for m in means])
+    if np.ptp(xs) <= 1e-9 * max(1.0, float(np.max(np.abs(xs)))) if xs.size else True:
+        xs, ys = _steady_means(uu, yy, rate)
+        if xs.size >= 2:
+            notes.append(f"static map from {xs.size} stretches where the input holds still (last half of each)")
+    smap = fit_static_map(xs, ys)
+    if xs.size < 3 or np.ptp(xs) <= 0:
+        return smap, None, None
+    # the straight line through the points: the average static gain a single linear model must match; its
+    # standard error grows with any curvature of the map, so a curved map is judged leniently
+    X = np.column_stack([xs - xs.mean(), np.ones(xs.size)])
+    coef, *_ = np.linalg.lstsq(X, ys, rcond=None)
+    resid = ys - X @ coef
+    s2 = float(resid @ resid) / (xs.size - 2)
+    se = math.sqrt(s2 / float(np.sum((xs - xs.mean()) ** 2)))
+    return smap, float(coef[0]), se
+
+
+def _steady_means(u: np.ndarray, y: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(mean input, mean output) over the last half of each stretch of at least 0.2 s where the input is constant."""
+    tol = 1e-3 * max(float(np.ptp(u)), 1e-12)
+    change = np.flatnonzero(np.abs(np.diff(u)) > tol) + 1
+    edges = np.concatenate([[0], change, [u.size]])
+    xs, ys = [], []
+    y_lo, y_hi = float(np.min(y)), float(np.max(y))
+    for a, b in zip(edges[:-1], edges[1:]):
+        if (b - a) / rate >= 0.2:
+            m = (a + b) // 2
+            part = y[m:b]
+            if np.mean((part == y_lo) | (part == y_hi)) > 0.05:
+                continue   # the sensor at the end of its range (the laser at 0 mm under -1 kV): not the plant
+            xs.append(float(np.mean(u[m:b])))
+            ys.append(float(np.mean(y[m:b])))
+    if len(xs) < 3:
+        W = max(2, int(2.0 * rate))
+        n = u.size // W
+        if n >= 3:
+            return _blocks(u[: n * W], W), _blocks(y[: n * W], W)
+    return np.array(xs), np.array(ys)
+
+
+def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes):
+    """Right-half-plane zeros outside the excited band are not supported by the data: mirror them, refine again.
+
+    The mirrored zero keeps the magnitude; the refit corrects the small in-band phase
+    change. The result replaces the fit only if its held-out error is within 2 % of it.
+    """
+    z = oe.model.zeros
+    f = np.abs(z) / (2 * np.pi)
+    bad = (np.real(z) > 0) & ((f < band[0] / 2) | (f > 2 * band[1]))
+    if not np.any(bad):
+        return oe, False
+    z2 = np.where(bad, -np.conj(z), z)
+    k = oe.model.num[0]
+    num = np.real(k * np.poly(z2))
+    g_old = oe.model.num[-1]
+    if num[-1] != 0:
+        num = num * g_old / num[-1]   # keep G(0)
+    m = TFModel(num, oe.model.den)
+    oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev)
+    z2 = oe2.model.zeros
+    f2 = np.abs(z2) / (2 * np.pi)
+    still = np.any((np.real(z2) > 0) & ((f2 < band[0] / 2) | (f2 > 2 * band[1])))
+    if still or not oe2.nrmse_heldout <= 1.1 * oe.nrmse_heldout + 1e-12:
+        # the held-out data prefer the non-minimum-phase model (a far zero acts as a small delay): keep it
+        notes.append(f"right-half-plane zero(s) outside the excited band kept: mirrored, the held-out NRMSE "
+                     f"goes from {oe.nrmse_heldout:.3g} to {oe2.nrmse_heldout:.3g} (the data show non-minimum "
+                     "phase, e.g. a small delay between input and output)")
+        return oe, True
+    if True:
+        notes.append(f"{int(np.count_nonzero(bad))} right-half-plane zero(s) outside the excited band mirrored into "
+                     f"the left half-plane (the data cannot show them) and the model refined again (held-out NRMSE {oe.nrmse_heldout:.3g} -> {oe2.nrmse_heldout:.3g})")
+        return oe2, False
+    return oe
+
+
+def _with_residual_test(dep: DependenceTest, rd: ResidualDependence) -> DependenceTest:
+    """The dependence verdict with the p-value of the calibrated residual test (spreads kept from the responses)."""
+    if rd.p_value >= dep.alpha:
+        verdict = "independent"
+    elif math.isfinite(dep.spread_db) and dep.spread_db <= dep.tol_db and dep.spread_deg <= dep.tol_deg:
+        verdict = "weakly_dependent"
+    else:
+        verdict = "dependent"
+    gains = ", ".join(f"{100 * c[0]:+.2g} %" for c in rd.coefficients)
+    summary = (f"{verdict.replace('_', ' ')}: per-operating-point gain corrections of the common model {gains}; "
+               f"p = {rd.p_value:.3g} (residual test: operating point against sub-block variability)")
+    if math.isfinite(dep.spread_db):
+        summary += f"; the responses differ by {dep.spread_db:.2g} dB and {dep.spread_deg:.2g} deg"
+    return replace(dep, verdict=verdict, summary=summary, chi2=rd.chi2, dof=rd.dof, p_value=rd.p_value,
+                   reduced_chi2=rd.chi2 / rd.dof,
+                   per_offset=[{**(dep.per_offset[k] if k < len(dep.per_offset) else {}),
+                                "gain_correction": c[0], "lag_correction_s": c[1],
+                                "gain_correction_se": se[0], "lag_correction_se_s": se[1]}
+                               for k, (c, se) in enumerate(zip(rd.coefficients, rd.std_errors))],
+                   method="residual", assumptions=rd.assumptions)
+
+
 def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float, float]] | None = None,
              options: IdentOptions | None = None, input_name: str = "input", output_name: str = "output",
              input_unit: str | None = None, output_unit: str | None = None,
@@ -529,8 +754,9 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         found = find_segments(t, uu, window_s=opts.window_s, min_step=opts.min_step, settle_s=opts.settle_s)
         segs, skipped = found.segments, found.skipped
     if not segs:
-        raise BadInputError(f"no operating point with excitation found in {input_name} "
-                            f"({len(skipped)} hold(s) or short piece(s) skipped)")
+        segs = [Segment(0, t.size, float(t[0]), float(t[-1]), float(np.mean(uu)), "whole log", 0.0)]
+        notes.append(f"no operating point with excitation found in {input_name} ({len(skipped)} hold(s) or "
+                     "short piece(s)): the whole log is analysed as one record")
     if opts.exclude_clipped:
         kept = []
         for s in segs:
@@ -550,122 +776,160 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         segs = kept
     lap("segments")
 
-    # 2. band and analysis rate
-    longest = max(segs, key=lambda s: s.i1 - s.i0)
-    if opts.band_hz is not None:
-        band = (float(opts.band_hz[0]), float(opts.band_hz[1]))
-        if not (0 <= band[0] < band[1]):
-            raise BadInputError(f"band_hz must be (low, high) with 0 <= low < high, got {opts.band_hz}")
-    else:
-        # the band the estimation parts see (a single sweep's held-out tail has other frequencies)
-        n_est_l = max(16, int(round((1.0 - opts.holdout_fraction) * (longest.i1 - longest.i0))))
-        band = excited_band(uu[longest.i0:longest.i0 + n_est_l], rate)
-        if opts.holdout_fraction > 0 and longest.i1 - longest.i0 - n_est_l >= 16:
-            held_band = excited_band(uu[longest.i0 + n_est_l:longest.i1], rate)
-            if held_band[1] > 1.2 * band[1] or held_band[0] < band[0] / 1.2:
-                notes.append(f"the held-out parts are excited over {held_band[0]:.3g}-{held_band[1]:.3g} Hz, "
-                             f"the estimation parts over {band[0]:.3g}-{band[1]:.3g} Hz: the validation "
-                             "extrapolates (repeat the excitation, or use a stationary one, to avoid this)")
-    if band[0] >= rate / 2:
-        raise BadInputError(f"the band {band[0]:g}-{band[1]:g} Hz lies above the Nyquist frequency {rate / 2:g} Hz")
-    band = (band[0], min(band[1], rate / 2))
-    target = opts.analysis_rate_hz if opts.analysis_rate_hz is not None else 20.0 * band[1]
-    M = max(1, int(rate // target))
-    fs = rate / M
-    hold = opts.holdout_fraction
-    lap("band")
-
-    # decimate each operating point, split estimation / held-out
-    say(f"{len(segs)} operating point(s); band {band[0]:.3g}-{band[1]:.3g} Hz; analysing at {fs:.6g} Hz")
-    dec = []
-    for s in segs:
-        ud, yd = _blocks(uu[s.i0:s.i1], M), _blocks(yy[s.i0:s.i1], M)
-        k_est = int(round((1.0 - hold) * ud.size))
-        dec.append((ud, yd, k_est))
-    n_est_min = min(k for _, _, k in dec)
+    # operating points much shorter than the longest are pieces of an excitation (steps), not points
+    longest_n = max(s.i1 - s.i0 for s in segs)
+    short = [s for s in segs if s.i1 - s.i0 < 0.25 * longest_n]
+    if short:
+        segs = [s for s in segs if s.i1 - s.i0 >= 0.25 * longest_n]
+        skipped += [SkippedPart(s.start_s, s.end_s, s.offset, "much shorter than the longest operating point")
+                    for s in short]
     try:
-        plan = welch_plan(n_est_min, fs, band, bins_per_octave=opts.bins_per_octave,
-                          min_averages=opts.min_averages)
+        fr = _frequency_responses(segs, t, uu, yy, rate, opts, notes)
     except BadInputError as err:
-        raise BadInputError(f"the operating points are too short for the band {band[0]:.3g}-{band[1]:.3g} Hz: "
-                            f"{err}") from err
-    band_lines = band
-    band = (max(band[0], 2 * fs / plan[0].nperseg), band[1])
-    lap("decimate")
-
-    # 3. per operating point: FFT ratio, H1, means
-    say("frequency responses (FFT ratio and Welch H1 with coherence)")
-    h1s: list[FreqResp] = []
-    periods: list[float | None] = []
-    means: list[tuple[float, float]] = []
-    for s, (ud, yd, k_est) in zip(segs, dec):
-        h1s.append(welch_h1(ud[:k_est], yd[:k_est], fs, plan=plan, band_hz=band))
-        p_d = detect_period(ud, fs, min_period_s=4.0 / band[1])
-        periods.append(None if p_d is None else _refine_period(uu[s.i0:s.i1], p_d * rate) / rate)
-        means.append((float(np.mean(ud[:k_est])), float(np.mean(yd[:k_est]))))
-    n_per = [None if p is None else int(round(p * rate)) for p in periods]
-    periodic = all(n is not None and n * 1 <= dec[i][2] * M for i, n in enumerate(n_per)) and \
-        len({n for n in n_per}) == 1
-    ffts: list[FreqResp] = []
-    for s, (_, _, k_est), p in zip(segs, dec, periods):
-        n_raw = k_est * M
-        ffts.append(fft_ratio(uu[s.i0:s.i0 + n_raw], yy[s.i0:s.i0 + n_raw], rate,
-                              band_hz=band_lines if periodic else band, period_s=p if periodic else None))
-    if periodic:
-        estimator = "periodic_fft"
-        notes.append(f"periodic input (period {n_per[0] / rate:.6g} s): the fit and the dependence test use the "
-                     "leakage-free FFT ratio over whole periods")
-    else:
-        estimator = "welch_h1"
+        fr = None
+        why = str(err)
+    if fr is None:
+        # no usable operating points (steps, random levels, a closed loop): the whole log is one record
+        segs = [Segment(0, t.size, float(t[0]), float(t[-1]), float(np.mean(uu)), "whole log", 0.0)]
+        notes.append(f"no operating points long enough for a frequency response ({why}): the whole log is "
+                     "analysed as one record")
+        fr = _frequency_responses(segs, t, uu, yy, rate, opts, notes)
+    band, fs, M = fr.band, fr.fs, fr.M
+    hold = opts.holdout_fraction
     lap("freqresp")
 
     say("static map and operating-point dependence test")
-    smap = fit_static_map([m[0] for m in means], [m[1] for m in means])
-    used = ffts if periodic else h1s
+    smap, line_slope, static_ci = _static_map(segs, fr.means, t, uu, yy, rate, notes)
+    used = fr.ffts if fr.periodic else fr.h1s
     dep = offset_dependence(used, coherence_min=opts.coherence_min, alpha=opts.alpha, tol_db=opts.tol_db,
-                            tol_deg=opts.tol_deg, unit=in_unit, thin=1 if periodic else 2)
+                            tol_deg=opts.tol_deg, unit=in_unit, thin=1 if fr.periodic else 2)
     pooled = pool(used)
-    fit_data = log_bin(pooled, per_octave=2 * opts.bins_per_octave) if periodic else pooled
+    fit_data = log_bin(pooled, per_octave=2 * opts.bins_per_octave) if fr.periodic else pooled
     lap("static_dependence")
 
-    # 5. transfer-function fit
+    # 5. transfer-function fit: frequency domain (start), then output error on the whole log
     say("transfer-function fit" + (f" of order {opts.order}" if opts.order else
-                                   f" (choosing the order, up to {opts.max_poles} poles)"))
-    if opts.order is not None:
-        fit = fit_tf_order(fit_data.f_hz, fit_data.H, int(opts.order[0]), int(opts.order[1]),
-                           sigma=fit_data.sigma, delay=opts.delay, rel_floor=opts.rel_floor)
-    else:
-        fit = fit_tf(fit_data.f_hz, fit_data.H, sigma=fit_data.sigma, max_poles=opts.max_poles,
-                     delay=opts.delay, rel_floor=opts.rel_floor)
+                                   f" (choosing the order on held-out data, up to {opts.max_poles} poles)"))
+    slope0 = line_slope if line_slope is not None else float("nan")
+    anchor = math.isfinite(slope0) and static_ci is not None and static_ci <= 0.05 * abs(slope0) and slope0 != 0
+    f_fit, H_fit, s_fit = fit_data.f_hz, fit_data.H, fit_data.sigma
+    if anchor:
+        # the static map pins G(0): a point below the band at the measured slope, with its uncertainty
+        f_a = float(np.min(f_fit)) / 8.0
+        f_fit = np.concatenate([[f_a], f_fit])
+        H_fit = np.concatenate([[slope0 + 0j], H_fit])
+        s_fit = np.concatenate([[max(float(static_ci), 0.003 * abs(slope0))], s_fit])
+    # the output-error fit runs at about 10 x the band's top (at most 250 Hz): enough for 0.1-40 Hz dynamics
+    M = max(1, int(rate // min(max(10.0 * band[1], 50.0), 250.0)))
+    fs = rate / M
+    oe_rate, oe_block = fs, M
+    ud_all, yd_all = _blocks(uu, M), _blocks(yy, M)
+    local = smap.degree >= 2 and len(segs) >= 2
+    bounds = ([(s.i0 // M, s.i1 // M) for s in segs] if local else [(0, ud_all.size)])
+    skip = int(round((opts.settle_s if opts.settle_s is not None else min(1.0, 0.02 * (t[-1] - t[0]))) * fs))
+    blk = int(round(np.clip((t[-1] - t[0]) / 30.0, 0.5, 5.0) * fs))
+    pieces = interleaved(ud_all.size, bounds, blk, hold if hold > 0 else 0.0, 0 if local else skip)
+    # a sensor at the end of its range (the laser reads 0 during a -1 kV pre-conditioning) says nothing of
+    # the plant: those samples leave both sets (the simulation runs through them)
+    clip = np.zeros(yy.size, bool)
+    for v in (float(np.min(yy)), float(np.max(yy))):
+        at = yy == v
+        if np.count_nonzero(at) >= max(3, 0.002 * yy.size):
+            clip |= at
+    if np.any(clip):
+        cb = _blocks(clip.astype(float), M) > 0
+        pieces.estimate[cb[: pieces.estimate.size]] = False
+        pieces.heldout[cb[: pieces.heldout.size]] = False
+        notes.append(f"{int(np.count_nonzero(clip))} output samples at the sensor's range limit left out of the "
+                     "output-error fit and of the validation")
+    if not np.any(pieces.estimate):
+        raise BadInputError("the log is too short: nothing left to estimate from after the settling time")
+    candidates = []
+    n_ps = [int(opts.order[1])] if opts.order is not None else list(range(1, opts.max_poles + 1))
+    best, stale = np.inf, 0
+    for n_p in n_ps:
+        nz = int(opts.order[0]) if opts.order is not None else n_p - 1
+        try:
+            start = fit_tf_order(f_fit, H_fit, nz, n_p, sigma=s_fit, delay=opts.delay, rel_floor=opts.rel_floor)
+            starts = [start.model]
+        except (BadInputError, ValueError):
+            start, starts = None, []
+        # two starts: the frequency-domain fit and an ARX fit on the samples; refine the better one
+        arx = arx_start(ud_all, yd_all, oe_rate, n_p, pieces) if opts.order is None or nz == n_p - 1 else None
+        if arx is not None:
+            starts.append(arx)
+        if not starts:
+            continue
+        pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0)
+               for m in starts]
+        pre_cost = np.array([p.nrmse_estimate for p in pre], float)
+        best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
+        oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
+                    max_nfev=opts.oe_max_nfev)
+        score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
+        # the starts themselves compete too (a refinement that does not generalise loses on held-out data)
+        for pr in pre:
+            sc = pr.nrmse_heldout if hold > 0 else pr.nrmse_estimate
+            if math.isfinite(sc) and sc < score:
+                oe, score = pr, sc
+        candidates.append((nz, n_p, start, oe, score))
+        if score < (1.0 - 0.02) * best:
+            stale = 0
+        else:
+            stale += 1
+        best = min(best, score)
+        if stale >= 2:
+            break
+    if not candidates:
+        raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")
+    ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12] or candidates
+    nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
+    oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
+    model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)
+    scores = [OrderScore(c[0], c[1], float(c[3].nrmse_estimate), float(c[4])) for c in candidates]
+    try:
+        fit = quality(model, fit_data, nz, n_p, float(oe.nrmse_estimate), scores)
+    except BadInputError:
+        # too few frequency points to score the fit in the frequency domain: time-domain numbers only
+        nan = float("nan")
+        fit = TFFit(model, nz, n_p, float(oe.nrmse_estimate), nan, nan, nan, nan, nan, band, scores)
     lap("tffit")
 
-    # 6. validation on the held-out tails
+    # 6. validation on the held-out blocks (never seen by the output-error fit)
     points: list[OperatingPoint] = []
     validation = None
-    num2 = den2 = 0.0
     per_pct: list[float] = []
-    if hold > 0:
-        say("time-domain validation on held-out data")
-    for s, (ud, yd, k_est), h1, ff, per, (mu, my) in zip(segs, dec, h1s, ffts, periods, means):
-        th = s.start_s + (np.arange(ud.size) + 0.5) * M / rate
-        if hold > 0 and ud.size - k_est >= 2:
-            yhat = float(smap(mu)) + simulate(fit.model, ud - mu, fs)
-            yh, yv = yhat[k_est:], yd[k_est:]
+    th_all = t[0] + (np.arange(ud_all.size) + 0.5) * M / rate
+    for s, h1, ff, per, (mu, my) in zip(segs, fr.h1s, fr.ffts, fr.periods, fr.means):
+        sl = slice(s.i0 // M, s.i1 // M)
+        hmask = pieces.heldout[sl]
+        if hold > 0 and np.count_nonzero(hmask) >= 2:
+            yv, yh = yd_all[sl][hmask], oe.y_hat[sl][hmask]
             pct = compare_fit(yv, yh)
-            num2 += float(np.sum((yv - yh) ** 2))
-            den2 += float(np.sum((yv - yv.mean()) ** 2))
             per_pct.append(pct)
-            points.append(OperatingPoint(s, mu, my, per, ff, h1, th[k_est:], yv, yh, pct))
+            points.append(OperatingPoint(s, mu, my, per, ff, h1, th_all[sl][hmask], yv, yh, pct))
         else:
             e = np.zeros(0)
             points.append(OperatingPoint(s, mu, my, per, ff, h1, e, e, e, float("nan")))
-    if per_pct and den2 > 0:
-        nr = math.sqrt(num2 / den2)
-        validation = Validation(compare_fit_pct=100.0 * (1.0 - nr), nrmse=nr, per_segment_pct=per_pct,
-                                holdout_fraction=hold)
+    if hold > 0 and math.isfinite(oe.nrmse_heldout):
+        validation = Validation(compare_fit_pct=100.0 * (1.0 - oe.nrmse_heldout), nrmse=oe.nrmse_heldout,
+                                per_segment_pct=per_pct, holdout_fraction=hold)
+    # the calibrated dependence test: residuals of the one model, operating point by operating point
+    if not local and len(segs) >= 2 and segs[0].source != "whole log":
+        rd = residual_dependence(yd_all, oe.y_hat, [(s.i0 // M, s.i1 // M) for s in segs], fs)
+        if rd is not None:
+            dep = _with_residual_test(dep, rd)
+    # a static map that does not pin the gain (too few levels, a standard error above 10 %) is not checked
+    informative = math.isfinite(slope0) and static_ci is not None and static_ci <= 0.1 * abs(slope0)
+    if not informative:
+        notes.append("the static map does not pin the static gain (fewer than three levels or a slope error "
+                     "above 10 %): G(0) was not checked against it")
+    check = check_model(model, band_hz=band, static_slope=slope0 if informative else None,
+                        static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
+                        min_compare_fit_pct=opts.min_compare_fit_pct, rhp_zeros_shown=rhp_shown)
     lap("validation")
-    return IdentResult(points=points, skipped=skipped, pooled=pooled, fit_data=fit_data, estimator=estimator,
+    return IdentResult(points=points, skipped=skipped, pooled=pooled, fit_data=fit_data, estimator=fr.estimator,
                        static_map=smap, fit=fit, dependence=dep,
                        validation=validation, band_hz=band, rate_hz=rate, analysis_rate_hz=fs,
                        input_name=input_name, output_name=output_name, input_unit=in_unit, output_unit=out_unit,
-                       options=opts, notes=notes, timings_s=timings)
+                       options=opts, notes=notes, timings_s=timings, check=check, static_slope_ci=static_ci)

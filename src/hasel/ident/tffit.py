@@ -33,7 +33,7 @@ from scipy import optimize
 
 from hasel.errors import BadInputError
 
-__all__ = ["TFModel", "OrderScore", "TFFit", "fit_tf", "fit_tf_order", "default_orders"]
+__all__ = ["TFModel", "OrderScore", "TFFit", "fit_tf", "fit_tf_order", "default_orders", "quality"]
 
 
 @dataclass(frozen=True)
@@ -374,6 +374,17 @@ def _quality(model: TFModel, f: np.ndarray, H: np.ndarray, w: np.ndarray, nz: in
                  max_db=float(np.max(np.abs(db))), rms_deg=float(np.sqrt(np.mean(deg**2))),
                  max_deg=float(np.max(np.abs(deg))), fit_percent=float(fit),
                  band_hz=(float(f[0]), float(f[-1])), scores=scores)
+
+
+def quality(model: TFModel, resp, nz: int, n_p: int, cost: float, scores: list[OrderScore], *,
+            rel_floor: float = 0.003) -> TFFit:
+    """A :class:`TFFit` for a given ``model`` against a measured response ``resp`` (a FreqResp).
+
+    ``cost`` and ``scores`` are stored as given; the dB, degree and percent errors are
+    computed over ``resp``'s points of finite uncertainty.
+    """
+    f, Hc, w = _prepare(resp.f_hz, resp.H, resp.sigma, rel_floor)
+    return _quality(model, f, Hc, w, nz, n_p, cost, scores)
 
 
 def fit_tf_order(f_hz: np.ndarray, H: np.ndarray, nz: int, np_: int, *, sigma: np.ndarray | None = None,

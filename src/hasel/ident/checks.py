@@ -1,0 +1,193 @@
+"""Is an identified model usable? The checks a model must pass before anyone relies on it.
+
+:func:`check_model` is what ``hasel identify`` runs on its own result (exit 1 and
+``"usable": false`` when it fails); :func:`check_model_json` runs the same checks on
+a MODEL.json (for ``diagnose`` and other consumers of a nominal model).
+
+A model is usable when all of these hold:
+
+1. every pole is in the open left half-plane, and none is near-marginal (damping
+   ratio below ``MARGINAL_DAMPING``);
+2. no lightly damped pole or zero (damping below ``LIGHT_DAMPING``) and no
+   right-half-plane zero lies outside the band the data excite (from half the
+   band's low edge to twice its top): the data cannot support it;
+3. the static gain ``G(0)`` agrees with the slope of the measured static map (mean
+   output against mean input) within ``max(3 standard errors, DC_REL_TOL)``;
+4. the held-out time-domain compare fit, ``100 (1 - NRMSE)``, is at least the stated
+   threshold (default 80 %).
+
+Each failure comes with the experiment that would fix it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ModelCheck", "check_model", "check_model_json", "MARGINAL_DAMPING", "LIGHT_DAMPING", "DC_REL_TOL",
+           "MIN_COMPARE_FIT_PCT"]
+
+#: Damping ratio below which a pole counts as near-marginal (unusable anywhere).
+MARGINAL_DAMPING = 0.005
+#: Damping ratio below which a pole or zero outside the excited band is unsupported.
+LIGHT_DAMPING = 0.05
+#: Smallest relative tolerance of G(0) against the static map's slope (3 %, 0.26 dB).
+DC_REL_TOL = 0.03
+#: Default threshold of the held-out compare fit, percent.
+MIN_COMPARE_FIT_PCT = 80.0
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """Outcome of :func:`check_model`.
+
+    Attributes
+    ----------
+    usable : bool
+        True when every check passed.
+    reasons : list of str
+        One sentence per failed check (what failed, with the numbers).
+    fixes : list of str
+        For each reason, the experiment that would fix it.
+    details : dict
+        The numbers behind each check (JSON-ready).
+    """
+
+    usable: bool
+    reasons: list[str] = field(default_factory=list)
+    fixes: list[str] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def one_line(self) -> str:
+        """One line for stderr: what failed first (and how many more) and which experiment would fix it."""
+        if self.usable:
+            return "model usable"
+        more = f" (and {len(self.reasons) - 1} more check(s) failed)" if len(self.reasons) > 1 else ""
+        return f"model not usable: {self.reasons[0]}{more}; to fix: {self.fixes[0]}"
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict: ``usable``, ``reasons``, ``fixes``, ``details``."""
+        return {"usable": self.usable, "reasons": list(self.reasons), "fixes": list(self.fixes),
+                "details": self.details}
+
+
+def _damping(r: np.ndarray) -> np.ndarray:
+    """Damping ratio ``-Re / |r|`` of each root (1 for a root at 0 to avoid a division by zero)."""
+    a = np.abs(r)
+    return np.where(a > 0, -np.real(r) / np.where(a > 0, a, 1.0), 1.0)
+
+
+def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope: float | None = None,
+                static_ci: float | None = None, heldout_nrmse: float | None = None,
+                min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT, rhp_zeros_shown: bool = False) -> ModelCheck:
+    """Run the checks of this module on a continuous transfer function.
+
+    Parameters
+    ----------
+    model : TFModel or any object with ``num``, ``den`` (descending powers of s, rad/s)
+        The model, input unit -> output unit.
+    band_hz : (float, float) or None
+        Band the data excite, Hz (None skips the band checks).
+    static_slope : float, optional
+        Slope of the measured static map at the operating point, output/input unit.
+    static_ci : float, optional
+        Its standard error (same unit); None when unknown (then only ``DC_REL_TOL`` applies).
+    heldout_nrmse : float, optional
+        NRMSE of the model's simulation on held-out data.
+    min_compare_fit_pct : float
+        Threshold of the held-out compare fit, percent.
+    rhp_zeros_shown : bool
+        The held-out data showed that the right-half-plane zeros are needed (their
+        mirror image fits worse): they are not held against the model.
+
+    Returns
+    -------
+    ModelCheck
+    """
+    num = np.atleast_1d(np.asarray(model.num, float))
+    den = np.atleast_1d(np.asarray(model.den, float))
+    poles = np.roots(den) if den.size > 1 else np.zeros(0, complex)
+    zeros = np.roots(num) if num.size > 1 else np.zeros(0, complex)
+    reasons: list[str] = []
+    fixes: list[str] = []
+    details: dict[str, Any] = {}
+    hz = lambda r: float(abs(r) / (2 * math.pi))  # noqa: E731 - a unit conversion
+    lo, hi = (band_hz[0] / 2.0, band_hz[1] * 2.0) if band_hz is not None else (0.0, math.inf)
+    band_txt = f"{band_hz[0]:.3g}-{band_hz[1]:.3g} Hz" if band_hz is not None else "?"
+
+    unstable = poles[np.real(poles) >= 0]
+    zp = _damping(poles)
+    marginal = poles[(np.real(poles) < 0) & (zp < MARGINAL_DAMPING)]
+    details["poles_hz_damping"] = [[hz(p), float(d)] for p, d in zip(poles, zp)]
+    if unstable.size:
+        reasons.append(f"{unstable.size} unstable pole(s), the first at {hz(unstable[0]):.3g} Hz")
+        fixes.append(f"log longer or repeated excitation over {band_txt} (an unstable fit means the data did not "
+                     "pin the dynamics)")
+    if marginal.size:
+        p = marginal[0]
+        reasons.append(f"near-marginal pole at {hz(p):.3g} Hz with damping {float(_damping(np.array([p]))[0]):.2g}")
+        fixes.append(f"excite around {hz(p):.3g} Hz (several periods of it) or drop that mode with --order")
+    if band_hz is not None:
+        for kind, roots in (("pole", poles), ("zero", zeros)):
+            d = _damping(roots)
+            f = np.abs(roots) / (2 * math.pi)
+            out = (f < lo) | (f > hi)
+            light = roots[out & (d < LIGHT_DAMPING) & (np.abs(np.imag(roots)) > 0)]
+            if kind == "pole":
+                light = light[np.real(light) < 0]
+                light = light[_damping(light) >= MARGINAL_DAMPING]
+            rhp = roots[out & (np.real(roots) > 0)] if kind == "zero" and not rhp_zeros_shown else np.zeros(0)
+            for r in list(light[np.imag(light) >= 0]):
+                reasons.append(f"lightly damped {kind} pair at {hz(r):.3g} Hz (damping "
+                               f"{float(_damping(np.array([r]))[0]):.2g}) outside the excited band {band_txt}")
+                fixes.append(f"excite from {min(band_hz[0], hz(r) / 2):.3g} Hz to {max(band_hz[1], 2 * hz(r)):.3g} Hz "
+                             "or give a lower --order")
+            for r in list(rhp[np.imag(rhp) >= 0]):
+                reasons.append(f"right-half-plane zero at {hz(r):.3g} Hz outside the excited band {band_txt}")
+                fixes.append(f"excite up to {max(band_hz[1], 2 * hz(r)):.3g} Hz to show whether the phase is "
+                             "non-minimum")
+    g0 = float(num[-1] / den[-1]) if den[-1] != 0 else math.inf
+    details["static_gain"] = g0 if math.isfinite(g0) else None
+    if static_slope is not None and math.isfinite(static_slope):
+        tol = max(3.0 * (static_ci or 0.0), DC_REL_TOL * abs(static_slope))
+        details.update(static_slope=float(static_slope), static_slope_se=static_ci, static_tolerance=float(tol))
+        if not math.isfinite(g0) or abs(g0 - static_slope) > tol:
+            reasons.append(f"static gain G(0) = {g0:.4g} disagrees with the measured static map slope "
+                           f"{static_slope:.4g} (tolerance {tol:.2g})")
+            fixes.append("hold the input at 3 or more levels (offsets or steps, each longer than the settling "
+                         "time) and excite down to lower frequencies")
+    if heldout_nrmse is not None:
+        pct = 100.0 * (1.0 - heldout_nrmse) if math.isfinite(heldout_nrmse) else -math.inf
+        details.update(heldout_compare_fit_pct=pct if math.isfinite(pct) else None,
+                       min_compare_fit_pct=float(min_compare_fit_pct))
+        if pct < min_compare_fit_pct:
+            reasons.append(f"held-out compare fit {pct:.1f} % is below {min_compare_fit_pct:g} %")
+            fixes.append(f"repeat the excitation (several periods or chirps per offset) over {band_txt} so the "
+                         "held-out part holds the same frequencies, or lower the noise")
+    return ModelCheck(usable=not reasons, reasons=reasons, fixes=fixes, details=details)
+
+
+def check_model_json(model_json: dict[str, Any], *, min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT) -> ModelCheck:
+    """The checks of :func:`check_model` on a MODEL.json dict (as ``hasel identify`` writes it).
+
+    A MODEL.json that says ``"usable": false`` stays unusable with its own reasons.
+    Otherwise the checks are run on ``num``/``den`` with what the file holds (band,
+    static map slope and its standard error, held-out NRMSE); missing items skip
+    their check. For ``diagnose`` and any consumer of a nominal model.
+    """
+    class _M:
+        num = np.asarray(model_json["num"], float)
+        den = np.asarray(model_json["den"], float)
+
+    if model_json.get("usable") is False:
+        reasons = [str(r) for r in model_json.get("reasons", [])] or ["marked unusable by hasel identify"]
+        fixes = [str(f) for f in model_json.get("fixes", [])] or ["identify again from a better experiment"]
+        return ModelCheck(False, reasons, fixes + [fixes[-1]] * (len(reasons) - len(fixes)), {})
+    band = model_json.get("frequency_band_hz")
+    chk = model_json.get("checks", {}).get("details", {}) if isinstance(model_json.get("checks"), dict) else {}
+    val = model_json.get("validation") or {}
+    return check_model(_M(), band_hz=tuple(band) if band else None, static_slope=chk.get("static_slope"),
+                       static_ci=chk.get("static_slope_se"), heldout_nrmse=val.get("nrmse"),
+                       min_compare_fit_pct=min_compare_fit_pct)

@@ -1,0 +1,411 @@
+"""Output-error refinement of a continuous transfer function on the whole log (time domain).
+
+The frequency-domain fit (:mod:`hasel.ident.tffit`) sees only the band the input
+excites inside each operating point. The log holds more: the steps between operating
+points, the holds, a pre-conditioning, the slow start of a sweep. All of it pins the
+static gain and the slow poles. This module fits ``y = c + G(s) (u - u_0)`` to the
+samples themselves (an output-error fit, the maximum-likelihood fit for white output
+noise), starting from the frequency-domain estimate, on interleaved estimation
+blocks, and scores it on the held-out blocks in between (which the fit never sees).
+
+Sampling convention (``hold``):
+
+- ``"zoh"`` (default): each input sample is held until the next one (a DAC, a
+  controller holding its command, this project's plant). The continuous model is
+  discretised exactly by zero-order hold.
+- ``"centred"``: the input samples are instantaneous readings of a smooth signal;
+  the simulation is advanced by half a sample.
+
+With block-averaged data (``M`` raw samples per block) the block mean of the output
+sits ``(M - 1) / 2`` raw samples after the block's start; the simulation is
+interpolated there.
+
+The simulation is the sum of first- and second-order sections in parallel (the
+partial fractions of ``G``), each discretised by its exact ZOH formula: fast enough
+to evaluate hundreds of times on 10^5 samples, well conditioned for lightly damped
+poles.
+"""
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from hasel.errors import BadInputError
+from hasel.ident.tffit import TFModel
+from hasel.lti import zoh_sos
+
+__all__ = ["simulate_zoh", "Pieces", "OEResult", "oe_fit", "HOLDS"]
+
+#: Accepted sampling conventions of the input.
+HOLDS = ("zoh", "centred")
+
+
+def _pole_sections(poles: np.ndarray, residues: np.ndarray, dt: float) -> list[np.ndarray]:
+    """One second-order section ``[b0, b1, b2, 1, a1, a2]`` per real pole or conjugate pair (exact ZOH)."""
+    secs = []
+    used = np.zeros(poles.size, bool)
+    for i, (p, r) in enumerate(zip(poles, residues)):
+        if used[i]:
+            continue
+        used[i] = True
+        a = np.exp(p * dt)
+        b = (a - 1.0) / p if abs(p) > 1e-300 else dt
+        if abs(p.imag) <= 1e-9 * max(abs(p), 1e-12):
+            secs.append(np.array([0.0, float(np.real(r * b)), 0.0, 1.0, -float(np.real(a)), 0.0]))
+            continue
+        # its conjugate: mark it used (the pair is one real section)
+        j = np.argmin(np.where(used, np.inf, np.abs(poles - np.conj(p))))
+        used[j] = True
+        rb = r * b
+        secs.append(np.array([0.0, 2.0 * rb.real, -2.0 * float(np.real(rb * np.conj(a))), 1.0,
+                              -2.0 * a.real, float(abs(a) ** 2)]))
+    return secs
+
+
+def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1) -> np.ndarray:
+    """Output of ``model`` for the input ``u`` (deviation from rest), sampled at ``rate_hz``.
+
+    Parameters
+    ----------
+    model : TFModel
+        Continuous model, s in rad/s (its delay is rounded to whole samples).
+    u : ndarray, shape (n,)
+        Input samples minus the level the system rests at, input unit.
+    rate_hz : float
+        Sample rate of ``u``, Hz.
+    hold : {"zoh", "centred"}
+        Sampling convention of the input (see the module).
+    block : int
+        Raw samples averaged into each sample of ``u`` and of the data compared with
+        (1 for raw data).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Output, output unit, on the data's sample times.
+    """
+    if hold not in HOLDS:
+        raise BadInputError(f"hold must be one of {', '.join(HOLDS)}, got {hold!r}")
+    x = np.asarray(u, float)
+    lag = int(round(model.delay_s * rate_hz))
+    if lag > 0:
+        x = np.concatenate([np.zeros(min(lag, x.size)), x[: max(x.size - lag, 0)]])
+    y = _sim_modal(np.asarray(model.num, float), np.asarray(model.den, float), x, 1.0 / rate_hz)
+    # where the data's sample sits between two simulated samples, in samples
+    frac = (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0)
+    if frac > 0:
+        yn = np.concatenate([y[1:], y[-1:]])
+        y = (1.0 - frac) * y + frac * yn
+    return y
+
+
+def _sim_modal(num: np.ndarray, den: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))) or den[0] == 0:
+        return np.full(u.shape, np.nan)   # a diverged parameter set: its residual is rejected by the caller
+    den = den / den[0]
+    num = num / den[0] if num.size else num
+    n_p = den.size - 1
+    d = float(num[0]) if num.size == den.size else 0.0
+    strictly = np.polysub(num, d * den) if d != 0.0 else num
+    poles = np.roots(den)
+    sep = np.where(np.eye(n_p, dtype=bool), np.inf, np.abs(poles[:, None] - poles[None, :]))
+    if np.min(sep) < 1e-5 * max(float(np.max(np.abs(poles))), 1e-12):
+        # (nearly) repeated poles: partial fractions lose their accuracy, use the state-space ZOH
+        return signal.sosfilt(zoh_sos(num, den, dt), u)
+    dprime = np.polyder(den)
+    res = np.polyval(strictly, poles) / np.polyval(dprime, poles)
+    y = d * u
+    if n_p == 0:
+        return y
+    for sec in _pole_sections(poles, res, dt):
+        y = y + signal.sosfilt(sec[None, :], u)
+    return y
+
+
+@dataclass(frozen=True)
+class Pieces:
+    """How the log is simulated and split: contiguous pieces, each from rest at its start.
+
+    Attributes
+    ----------
+    bounds : list of (int, int)
+        Sample ranges ``i0 <= i < i1`` simulated separately (each with its own level
+        ``u[i0]`` and output constant).
+    estimate : ndarray of bool
+        Samples used by the fit.
+    heldout : ndarray of bool
+        Samples kept out of the fit and used to score it.
+    """
+
+    bounds: list[tuple[int, int]]
+    estimate: np.ndarray
+    heldout: np.ndarray
+
+
+def interleaved(n: int, bounds: Sequence[tuple[int, int]], block: int, holdout_fraction: float,
+                skip: int) -> Pieces:
+    """Pieces with every ``round(1 / holdout_fraction)``-th block of ``block`` samples held out.
+
+    The first ``skip`` samples of each piece (its start-up transient) are in neither set.
+    """
+    est = np.zeros(n, bool)
+    held = np.zeros(n, bool)
+    every = int(round(1.0 / holdout_fraction)) if holdout_fraction > 0 else 0
+    for i0, i1 in bounds:
+        j0 = min(i0 + skip, i1)
+        idx = np.arange(j0, i1)
+        if every:
+            k = (idx - j0) // max(block, 1)
+            h = (k % every) == every // 2
+        else:
+            h = np.zeros(idx.size, bool)
+        est[idx[~h]] = True
+        held[idx[h]] = True
+    return Pieces(list(bounds), est, held)
+
+
+@dataclass(frozen=True)
+class OEResult:
+    """An output-error fit.
+
+    Attributes
+    ----------
+    model : TFModel
+    nrmse_estimate, nrmse_heldout : float
+        ``||y - y_hat|| / ||y - mean(y)||`` on the estimation and held-out samples
+        (each piece centred on its own mean).
+    levels : list of float
+        The fitted output constant of each piece.
+    y_hat : ndarray
+        The simulation over the whole log.
+    """
+
+    model: TFModel
+    nrmse_estimate: float
+    nrmse_heldout: float
+    levels: list[float]
+    y_hat: np.ndarray
+
+
+def _to_theta(model: TFModel, w0: float) -> tuple[np.ndarray, int, int]:
+    """Parameters: numerator in x = s / w0 (ascending) and the log of each quadratic/linear factor's coefficients."""
+    den = np.asarray(model.den, float) / model.den[0]
+    num = np.asarray(model.num, float) / model.den[0]
+    n_p, nz = den.size - 1, num.size - 1
+    roots = np.roots(den) / w0
+    roots = np.where(np.real(roots) >= 0, -np.abs(roots) - 1e-9, roots)
+    cplx = roots[np.imag(roots) > 1e-12 * np.maximum(np.abs(roots), 1.0)]
+    real = np.sort(-np.real(roots[np.abs(np.imag(roots)) <= 1e-12 * np.maximum(np.abs(roots), 1.0)]))
+    params = []
+    for p in cplx:
+        params += [np.log(max(-2.0 * p.real, 1e-12)), np.log(max(abs(p) ** 2, 1e-12))]
+    i = 0
+    while i + 1 < real.size:
+        params += [np.log(real[i] + real[i + 1]), np.log(real[i] * real[i + 1])]
+        i += 2
+    if i < real.size:
+        params.append(np.log(real[i]))
+    b = num[::-1] * w0 ** np.arange(nz + 1) / w0 ** n_p
+    return np.concatenate([b, params]), nz, n_p
+
+
+def _from_theta(theta: np.ndarray, nz: int, n_p: int, w0: float) -> TFModel:
+    b = theta[: nz + 1]
+    q = theta[nz + 1:]
+    den = np.array([1.0])
+    for k in range(n_p // 2):
+        den = np.polymul(den, [1.0, np.exp(q[2 * k]), np.exp(q[2 * k + 1])])
+    if n_p % 2:
+        den = np.polymul(den, [1.0, np.exp(q[-1])])
+    num_s = b[::-1] / w0 ** np.arange(nz, -1, -1)
+    den_s = den / w0 ** np.arange(n_p, -1, -1)
+    return TFModel(num=num_s / den_s[0], den=den_s / den_s[0])
+
+
+def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *, hold: str = "zoh",
+           block: int = 1, max_nfev: int = 60, log_pmin: float | None = None) -> OEResult:
+    """Refine ``model0`` (same orders) by output error on ``pieces.estimate``; score on ``pieces.heldout``.
+
+    Parameters
+    ----------
+    model0 : TFModel
+        Start (from the frequency-domain fit); its orders are kept, its delay ignored.
+    u, y : ndarray, shape (n,)
+        Input and output at ``rate_hz`` (block means if ``block > 1``).
+    rate_hz : float
+        Their rate, Hz.
+    pieces : Pieces
+        Pieces simulated from rest, estimation and held-out samples.
+    hold, block :
+        As for :func:`simulate_zoh`.
+    max_nfev : int
+        Budget of the least-squares refinement (function evaluations).
+    log_pmin : float, optional
+        Natural log of the smallest pole magnitude allowed, rad/s (default: none).
+
+    Returns
+    -------
+    OEResult
+    """
+    w0 = float(np.max(np.abs(np.roots(model0.den)))) if model0.den.size > 1 else 1.0
+    w0 = max(w0, 1e-6)
+    theta0, nz, n_p = _to_theta(model0, w0)
+    est = pieces.estimate
+    lo_bound = None
+    if log_pmin is not None:
+        lo_bound = log_pmin - np.log(w0)
+
+    def sim(theta: np.ndarray) -> tuple[np.ndarray, list[float]]:
+        th = theta
+        if lo_bound is not None:
+            th = theta.copy()
+            q = th[nz + 1:]
+            q[1:2 * (n_p // 2):2] = np.maximum(q[1:2 * (n_p // 2):2], 2 * lo_bound)
+            if n_p % 2:
+                q[-1] = max(q[-1], lo_bound)
+        m = _from_theta(th, nz, n_p, w0)
+        out = np.empty_like(y)
+        levels = []
+        for i0, i1 in pieces.bounds:
+            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block)
+            e = est[i0:i1]
+            c = float(np.mean(y[i0:i1][e] - ys[e])) if np.any(e) else float(np.mean(y[i0:i1] - ys))
+            out[i0:i1] = ys + c
+            levels.append(c)
+        return out, levels
+
+    scale = float(np.std(y[est])) or 1.0
+
+    def resid(theta: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            try:
+                yh, _ = sim(np.clip(theta, -700.0, 700.0))
+            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+                return np.full(int(np.count_nonzero(est)), 1e3)
+        r = (y[est] - yh[est]) / scale
+        return np.where(np.isfinite(r), r, 1e3)
+
+    r0 = resid(theta0)
+    if max_nfev <= 0:
+        yh, levels = sim(theta0)
+        return OEResult(_from_theta(theta0, nz, n_p, w0), _nrmse(y, yh, pieces, est),
+                        _nrmse(y, yh, pieces, pieces.heldout), levels, yh)
+    theta = _levenberg_marquardt(resid, theta0, r0, max_iter=max(1, max_nfev // 3))
+    yh, levels = sim(theta)
+    model = _from_theta(theta, nz, n_p, w0)
+    return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh)
+
+
+def _levenberg_marquardt(resid, theta0: np.ndarray, r0: np.ndarray, max_iter: int) -> np.ndarray:
+    """Minimise ``||resid(theta)||^2`` from ``theta0``: Levenberg-Marquardt on the normal equations.
+
+    The Jacobian is taken by forward differences; the normal equations (parameters x
+    parameters) are solved instead of a factorisation of the tall Jacobian, which on
+    10^5 samples is what makes the fit fast. Never returns a worse point than ``theta0``.
+    """
+    theta, r = theta0.copy(), r0
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(max_iter):
+        h = 1e-6 * np.maximum(np.abs(theta), 1e-2)
+        J = np.empty((r.size, theta.size))
+        for i in range(theta.size):
+            tp = theta.copy()
+            tp[i] += h[i]
+            J[:, i] = (resid(tp) - r) / h[i]
+        J = np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
+        g = J.T @ r
+        A = J.T @ J
+        d = np.sqrt(np.maximum(np.diag(A), 1e-30))
+        An = A / np.outer(d, d)
+        gn = g / d
+        improved = False
+        rel = 0.0
+        for _ in range(8):
+            try:
+                step = -np.linalg.solve(An + lam * np.eye(theta.size), gn) / d
+            except (np.linalg.LinAlgError, ValueError):
+                lam *= 10
+                continue
+            rn = resid(theta + step)
+            cn = float(rn @ rn)
+            if cn < cost:
+                rel = (cost - cn) / cost
+                theta, r, cost = theta + step, rn, cn
+                lam = max(lam / 5, 1e-9)
+                improved = True
+                break
+            lam *= 10
+        if not improved or rel < 1e-6:
+            break
+    return theta
+
+
+def _nrmse(y: np.ndarray, yh: np.ndarray, pieces: Pieces, mask: np.ndarray) -> float:
+    """NRMSE over ``mask``, each contiguous run of it centred on its own mean.
+
+    Centring each run (not the whole log) scores the dynamics: the level changes
+    between operating points would otherwise dominate the denominator.
+    """
+    num = den = 0.0
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return float("nan")
+    cut = np.flatnonzero(np.diff(idx) > 1) + 1
+    for run in np.split(idx, cut):
+        yy, hh = y[run], yh[run]
+        num += float(np.sum((yy - hh) ** 2))
+        den += float(np.sum((yy - yy.mean()) ** 2))
+    return float(np.sqrt(num / den)) if den > 0 else float("nan")
+
+
+def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pieces) -> TFModel | None:
+    """A continuous start of ``n_p`` poles from a least-squares ARX fit on the estimation samples.
+
+    ``y[k] = -sum a_i y[k-i] + sum b_i u[k-i] + c`` (``i = 1..n_p``) is linear in its
+    parameters, so it needs no start itself and uses every sample (steps, levels,
+    transitions). The discrete model is made continuous by the matrix logarithm of
+    its zero-order-hold state-space form. Returns None when that is impossible (a
+    pole on the negative real axis of z) or the result is unstable.
+    """
+    from scipy import linalg
+
+    n = n_p
+    k = np.arange(n, y.size)
+    k = k[pieces.estimate[k]]
+    if k.size < 4 * (2 * n + 1):
+        return None
+    cols = [-y[k - i] for i in range(1, n + 1)] + [u[k - i] for i in range(1, n + 1)] + [np.ones(k.size)]
+    X = np.column_stack(cols)
+    scale = np.linalg.norm(X, axis=0)
+    scale[scale == 0] = 1.0
+    theta = np.linalg.lstsq(X / scale, y[k], rcond=None)[0] / scale
+    a = np.concatenate([[1.0], theta[:n]])
+    b = np.concatenate([[0.0], theta[n:2 * n]])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # tf2ss/ss2tf warn of tiny leading numerator terms; they are trimmed
+            A, B, C, D = signal.tf2ss(b, a)
+        dt = 1.0 / rate_hz
+        big = np.zeros((n + 1, n + 1))
+        big[:n, :n] = A
+        big[:n, n:] = B
+        big[n, n] = 1.0
+        L = linalg.logm(big) / dt
+        if np.max(np.abs(np.imag(L))) > 1e-6 * max(np.max(np.abs(L)), 1.0):
+            return None
+        Ac, Bc = np.real(L[:n, :n]), np.real(L[:n, n:])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # ss2tf warns of tiny leading numerator terms; they are trimmed
+            num, den = signal.ss2tf(Ac, Bc, C, D)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    num = np.trim_zeros(np.atleast_1d(num[0]), "f")
+    if num.size == 0 or not np.all(np.isfinite(den)) or np.any(np.real(np.roots(den)) >= 0):
+        return None
+    num = num[-n:] if num.size > n else num
+    return TFModel(num=np.asarray(num, float) / den[0], den=np.asarray(den, float) / den[0])

@@ -1,0 +1,170 @@
+"""Effect-free logs of common identification designs, simulated from the paper's P(s).
+
+The oracle of the identification tests and the tuning corpus of ``bench/tune_ident``.
+It is written independently of :mod:`hasel.ident` and of the project's plant: the
+plant is P(s) of :mod:`hasel.paper` discretised here by scipy's zero-order hold (a DAC
+holds each input sample), the excitations are built here, and the output is the
+stroke plus white noise. Units: kV in, mm out, s.
+
+Designs (:data:`DESIGNS`), each on offsets 2..7 kV unless said otherwise:
+
+- ``paper_chirp``: one 20 s chirp of the paper's formula ``sin(2 pi k t^2)`` per offset
+  (instantaneous frequency 0 -> 40 Hz) after ``settle_s`` at the offset;
+- ``paper_chirp3``: the same chirp three times back to back per offset;
+- ``linear_chirp``: 0.05 -> 20 Hz linear sweep, 30 s, once per offset;
+- ``log_chirp``: 0.05 -> 20 Hz logarithmic sweep, 30 s, twice per offset;
+- ``multisine``: odd random-phase multisine 0.1-20 Hz, 10 s period, 3 periods per offset;
+- ``prbs``: random binary levels +-0.7 kV about each offset, held for a random
+  multiple of 20 ms, 20 s per offset;
+- ``random_steps``: random levels uniform in +-1 kV about each offset held 0.05-1 s;
+- ``voltage_steps``: a staircase 0, 2, 4, 6, 4, 2, 0 ... kV, 1.5 s per level, twice;
+- ``closed_loop``: the paper's dual-mode PID at 200 Hz on the noisy stroke, reference
+  2 -> 4 -> 6 -> 4 -> 2 mm, 2 s each, three times; the log holds the applied voltage.
+
+``precondition=True`` puts 1 s at -1 kV (then 0.2 s at 0 kV) before each offset.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+from hasel import paper
+
+DESIGNS = ("paper_chirp", "paper_chirp3", "linear_chirp", "log_chirp", "multisine", "prbs", "random_steps",
+           "voltage_steps", "closed_loop")
+OFFSETS_KV = (2.0, 3.0, 4.0, 5.0, 6.0, 7.0)
+
+
+@dataclass
+class Log:
+    """A simulated log: times (s), applied voltage (kV), measured stroke (mm) and what made it."""
+
+    t_s: np.ndarray
+    u_kv: np.ndarray
+    y_mm: np.ndarray
+    design: str
+    rate_hz: float
+    meta: dict = field(default_factory=dict)
+
+
+def plant_discrete(rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """P(s) as a ZOH state-space model ``(A, B, C, D)`` at ``rate_hz`` (kV -> mm)."""
+    num, den = paper.plant_tf()
+    A, B, C, D = signal.tf2ss(num, den)
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), 1.0 / rate_hz, method="zoh")
+    return Ad, Bd, Cd, Dd
+
+
+def static_gain() -> float:
+    """P(0), mm/kV."""
+    num, den = paper.plant_tf()
+    return float(num[-1] / den[-1])
+
+
+def _simulate(u: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Stroke of P(s) for the held input samples ``u`` starting at rest at ``u[0]``."""
+    Ad, Bd, Cd, Dd = plant_discrete(rate_hz)
+    x0 = np.linalg.solve(np.eye(Ad.shape[0]) - Ad, Bd[:, 0] * u[0])
+    _, y, _ = signal.dlsim((Ad, Bd, Cd, Dd, 1.0 / rate_hz), u, x0=x0)
+    return np.asarray(y).ravel()
+
+
+def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
+    if kind in ("paper_chirp", "paper_chirp3"):
+        t = np.arange(int(round(20.0 * rate_hz))) / rate_hz
+        one = np.sin(2 * np.pi * (20.0 / 20.0) * t * t)
+        return np.tile(one, 3 if kind == "paper_chirp3" else 1)
+    if kind == "linear_chirp":
+        t = np.arange(int(round(30.0 * rate_hz))) / rate_hz
+        return signal.chirp(t, 0.05, 30.0, min(20.0, 0.4 * rate_hz), method="linear", phi=-90)
+    if kind == "log_chirp":
+        t = np.arange(int(round(30.0 * rate_hz))) / rate_hz
+        return np.tile(signal.chirp(t, 0.05, 30.0, min(20.0, 0.4 * rate_hz), method="logarithmic", phi=-90), 2)
+    if kind == "multisine":
+        n = int(round(10.0 * rate_hz))
+        k = np.arange(1, int(min(20.0, 0.4 * rate_hz) * 10.0) + 1, 2)
+        spec = np.zeros(n // 2 + 1, complex)
+        spec[k] = np.exp(2j * np.pi * rng.random(k.size))
+        x = np.fft.irfft(spec, n)
+        return np.tile(0.9 * x / np.max(np.abs(x)), 3)
+    if kind == "prbs":
+        n = int(round(20.0 * rate_hz))
+        clock = max(1, int(round(0.02 * rate_hz)))
+        bits = rng.integers(0, 2, n // clock + 1) * 2 - 1
+        return 0.7 * np.repeat(bits, clock)[:n].astype(float)
+    if kind == "random_steps":
+        n = int(round(20.0 * rate_hz))
+        out = np.empty(n)
+        i = 0
+        while i < n:
+            hold = int(rng.uniform(0.05, 1.0) * rate_hz) + 1
+            out[i:i + hold] = rng.uniform(-1.0, 1.0)
+            i += hold
+        return out
+    raise ValueError(kind)
+
+
+def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, precondition: bool = False,
+             settle_s: float = 0.5, noise_mm: float = 0.01, offsets_kv=OFFSETS_KV) -> Log:
+    """One effect-free log of ``design`` (see the module) at ``rate_hz``, white noise ``noise_mm`` (mm RMS)."""
+    rng = np.random.default_rng(seed)
+    if design == "closed_loop":
+        return _closed_loop(rate_hz, rng, noise_mm)
+    parts: list[np.ndarray] = [np.zeros(int(round(0.5 * rate_hz)))]
+    marks = []
+    if design == "voltage_steps":
+        levels = [0.0, 2.0, 4.0, 6.0, 4.0, 2.0, 0.0, 3.0, 5.0, 7.0, 5.0, 3.0, 0.0]
+        for v in levels:
+            parts.append(np.full(int(round(1.5 * rate_hz)), v))
+    else:
+        for off in offsets_kv:
+            if precondition:
+                parts.append(np.full(int(round(1.0 * rate_hz)), -1.0))
+                parts.append(np.zeros(int(round(0.2 * rate_hz))))
+            parts.append(np.full(int(round(settle_s * rate_hz)), off))
+            n0 = sum(p.size for p in parts)
+            x = off + _chirp_per_offset(design, rate_hz, rng)
+            parts.append(x)
+            marks.append((n0 / rate_hz, (n0 + x.size) / rate_hz, off))
+        parts.append(np.zeros(int(round(0.5 * rate_hz))))
+    u = np.concatenate(parts)
+    y = _simulate(u, rate_hz) + noise_mm * rng.standard_normal(u.size)
+    t = np.arange(u.size) / rate_hz
+    return Log(t, u, y, design, rate_hz, {"excitation_segments": marks, "precondition": precondition,
+                                          "settle_s": settle_s, "noise_mm": noise_mm, "seed": seed})
+
+
+def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float) -> Log:
+    """The dual-mode PID at 200 Hz (its own implementation) around P(s) simulated at ``rate_hz``."""
+    Ad, Bd, Cd, Dd = plant_discrete(rate_hz)
+    dt_c = paper.LOOP_PERIOD_S
+    every = max(1, int(round(dt_c * rate_hz)))
+    dt_c = every / rate_hz
+    refs = [0.0] + list(paper.STEP_SEQUENCE_MM) * 3 + [0.0]
+    hold = int(round(2.0 * rate_hz))
+    r = np.repeat(np.array(refs, float), hold)
+    r[:hold] = 0.0
+    n = r.size
+    x = np.zeros(Ad.shape[0])
+    u = np.zeros(n)
+    y = np.zeros(n)
+    integ, e_prev, v = 0.0, 0.0, 0.0
+    for i in range(n):
+        y_true = float(Cd[0] @ x + Dd[0, 0] * v)
+        y[i] = y_true + noise_mm * rng.standard_normal()
+        if i % every == 0 and i >= hold:
+            e = r[i] - y[i]
+            kp, ki, kd = paper.C_PLUS if e >= 0 else paper.C_MINUS
+            integ_new = integ + 0.5 * (e + e_prev) * dt_c
+            out = kp * e + ki * integ_new + kd * (e - e_prev) / dt_c
+            if 0.0 <= out <= paper.V_MAX_KV:
+                integ = integ_new
+            v = float(np.clip(out, 0.0, paper.V_MAX_KV))
+            e_prev = e
+        u[i] = v
+        x = Ad @ x + Bd[:, 0] * v
+    # the stroke sample i is taken before the voltage of sample i acts (as a sampled loop does)
+    t = np.arange(n) / rate_hz
+    return Log(t, u, y, "closed_loop", rate_hz, {"noise_mm": noise_mm, "reference_mm": refs})
