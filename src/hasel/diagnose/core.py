@@ -476,10 +476,10 @@ def _alike(results: list[tuple], eff_new: dict, e_new: np.ndarray, mse_ho: float
             continue
         g_alt = (mse_ho - r[0]) / mse_ho if mse_ho > 0 else 0.0
         if g_alt <= 0 or g_alt < opts.alike_share * gain:
-            return None
+            return None  # sorted by validation error: no later one is alike either
         pref = block_test(r[5], e_new, labels_va, slow_n)
         if pref >= opts.t_min:
-            return None
+            continue
         key = frozenset((new[-1], names[-1])) if new else frozenset()
         return {"chosen": " + ".join(new), "alternative": " + ".join(names),
                 "validation_nrmse": {"chosen": to_nrmse(mse_ho * (1 - gain)), "alternative": to_nrmse(r[0])},
