@@ -269,7 +269,9 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         samples, up to 240 blocks. With a separate held-out log, the same blocks of the
         first log, the held-out ones validating.
     max_samples : int
-        Cap on working samples (the rate is lowered, never below 8 times the band).
+        Cap on working samples: the rate is lowered, never below 8 times the band; beyond
+        that only the first ``max_samples`` working samples are diagnosed
+        (``info["truncated_to_s"]`` says how many seconds).
 
     Returns
     -------
@@ -297,6 +299,12 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
             raise BadInputError(f"the held-out log is sampled at {fsh:g} Hz, the log at {fs:g} Hz; they must match")
         hold_log = (th, uh, yh)
     tw, uw, yw = _block_mean(t, q), _block_mean(uu, q), _block_mean(yy, q)
+    truncated = None
+    if target_rate_hz is None and tw.size > max_samples:
+        # the band does not allow a lower rate: diagnose the first max_samples working samples only
+        # (every simulation runs over the whole record, so time grows with its length)
+        truncated = float(tw[max_samples - 1] - tw[0])
+        tw, uw, yw = tw[:max_samples], uw[:max_samples], yw[:max_samples]
     if hold_log is None:
         # blocks of about a dozen samples in short logs (an event such as a single step is then
         # shared by training and held-out data), up to 240 blocks in long ones
@@ -316,7 +324,8 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     # block means of q instantaneous samples of a zero-order-hold log: the output sits (q - 1) / 2
     # original samples into the interval over which the block's mean input is held
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
-                    info={"original_rate_hz": fs, "n_original": int(t.size)}, sample_offset=(q - 1) / (2.0 * q))
+                    info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
+                    sample_offset=(q - 1) / (2.0 * q))
 
 
 class LinearSim:
