@@ -352,6 +352,8 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
             with np.errstate(all="ignore"):
                 res = ident_identify(rec.t_s, rec.u, rec.y)
             mj = res.to_model_json()
+            if mj.get("usable") is False:  # hasel.ident's own checks failed: never a nominal model
+                raise ValueError("its model failed its own checks: " + "; ".join(map(str, mj.get("reasons", []))))
             num, den = _as_model(mj)
             if np.any(np.real(np.roots(den)) >= 0):
                 raise ValueError("unstable model")
