@@ -99,7 +99,13 @@ def test_cascaded_tanks_overflow_is_named_saturation_beside_the_static_map():
     h = v.heldout
     assert h["split"] == "separate held-out log" and h["nrmse_nominal"] > 1.0
     assert h["nrmse_augmented"] < 0.4 * h["nrmse_nominal"]
-    assert {"saturation", "static_nonlinearity"} <= set(v.names)
+    assert "saturation" in v.names
+    # the static map removes nearly all of the validation error (levels of the estimation log) but
+    # makes the separate held-out log worse (its levels differ; a degree-5 map extrapolates badly):
+    # it is dropped as "seen in training, did not generalise", with both figures
+    if "static_nonlinearity" not in v.names:
+        d = next(x for x in v.dropped if x["name"] == "static_nonlinearity")
+        assert d["final_nrmse_with"] > d["final_nrmse_without"] and d["validation_gap_removed"] > 0.5
     sat = next(e for e in v.effects if e["name"] == "saturation")["params"]
     assert sat["acts_on"] == "output" and sat["upper"] == pytest.approx(10.0)
     assert v.where["level"]["clipped_output"]["upper"]["samples"] == 47
