@@ -689,7 +689,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "static_nonlinearity": lambda: ((f"the residual follows the operating level (level bins explain "
                                          f"{_pct(level_share)} of it, the direction {_pct(dr['extra_share'])} more)"
                                          if level_share >= 0.05 else
-                                         f"a level-dependent gain shows in the fit though level bins alone explain only "
+                                         f"a level-dependent gain shows in the fit though level bins alone explain "
                                          f"{_pct(level_share)} of the residual (a map is curved within each bin)")
                                         + f"; the distortion passes through the dynamics ({fit.variant} map)"),
         "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
@@ -1231,6 +1231,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         return scores(_without(current, n))[1]
 
     sse_nom_fi, sse_all_fi = final_sse({}), final_sse(current)
+    mse_nom_va = scores({})[1]  # the nominal model as given (no offset): the base of every credit
     # a delay within one original sample is a timing offset (a convention or clock offset), not physics:
     # it stays in the model as a nuisance and is reported with the timing offset
     fs_orig = prep.info.get("original_rate_hz", prep.rate_hz)
@@ -1247,7 +1248,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         fit = current[name]
         m_after = final_nrmse({k2: current[k2] for k2 in ranked[:i + 1] + ([LINEAR] if LINEAR in current else [])})
         gain, runner = evidence_of.get(name, (0.0, None))
-        credit_va = (loss_without(name) - mse_ho) / mse_nom if mse_nom > 0 else 0.0
+        credit_va = (loss_without(name) - mse_ho) / mse_nom_va if mse_nom_va > 0 else 0.0
         credit_fi = (final_sse(_without(current, name)) - sse_all_fi) / sse_nom_fi if sse_nom_fi > 0 else 0.0
         named.append({"name": name, "params": describe_params(pipe, fit, units, effects=current),
                       "evidence": _evidence(name, fit, where, credit_va, runner, pipe, units, credit_fi),
