@@ -70,7 +70,7 @@ from hasel import paper
 __all__ = [
     "EFFECT_KINDS", "ForeignEffect", "sample_foreign", "play_operator", "prandtl_ishlinskii", "duhem",
     "FohSystem", "pade_tf", "simulate", "excitation", "ForeignCase", "make_case", "score", "run_othersim",
-    "format_report", "main",
+    "format_report", "main", "FREE_DESIGNS", "CONVENTIONS", "FreeCase", "make_free_case",
 ]
 
 #: Foreign kinds of each verdict name (the names of ``shared/interfaces.md``).
@@ -576,6 +576,168 @@ def make_case(index: int, seed: int, effects: tuple[ForeignEffect, ...], directo
     path = os.path.join(directory, f"other_{index:03d}.npz")
     np.savez_compressed(path, t_s=t, voltage_kv=u, stroke_mm=y, num=num, den=den)
     return ForeignCase(index, seed, tuple(effects), rate, noise, info, path)
+
+
+# --------------------------------------------------------------------------- effect-free logs of many designs
+
+#: Designs of the effect-free calibration logs.
+FREE_DESIGNS = ("paper", "chirp", "multisine", "prbs", "closed_loop")
+#: Sampling conventions: input held (zoh) or linearly interpolated (foh) over each sample; output at
+#: the sample's start, or mid-sample (centred).
+CONVENTIONS = ("zoh", "foh", "centred")
+
+
+def _design_input(design: str, rng: np.random.Generator, rate_hz: float, duration_s: float) -> np.ndarray:
+    """An open-loop command (kV) of ``design`` at ``rate_hz`` (``paper`` uses :func:`excitation`)."""
+    n = int(round(duration_s * rate_hz))
+    t = np.arange(n) / rate_hz
+    off = float(rng.uniform(2.5, 5.5))
+    if design == "paper":
+        return excitation(rng, rate_hz)[0]
+    if design == "chirp":  # one logarithmic chirp 0.1-20 Hz after a settle at the offset
+        f0, f1 = 0.1, float(rng.uniform(12.0, 20.0))
+        ts = np.maximum(t - 1.0, 0.0)
+        T = max(duration_s - 1.0, 1.0)
+        k = (f1 / f0) ** (1.0 / T)
+        ph = 2 * np.pi * f0 * (k ** ts - 1.0) / math.log(k)
+        return off + float(rng.uniform(0.6, 1.2)) * np.where(t >= 1.0, np.sin(ph), 0.0)
+    if design == "multisine":  # random-phase multisine 0.05-15 Hz, period 20 s
+        per = 20.0
+        f = np.arange(1, int(15.0 * per) + 1) / per
+        phs = rng.uniform(0, 2 * np.pi, f.size)
+        tm = np.arange(int(round(per * rate_hz))) / rate_hz
+        ms = np.zeros(tm.size)
+        for fi, pi in zip(f, phs):
+            ms += np.sin(2 * np.pi * fi * tm + pi)
+        ms = np.resize(ms / ms.std(), n)
+        return off + float(rng.uniform(0.4, 0.8)) * ms
+    if design == "prbs":  # random level steps held 0.05-0.6 s
+        out = np.empty(n)
+        i = 0
+        while i < n:
+            m = int(rng.uniform(0.05, 0.6) * rate_hz) + 1
+            out[i:i + m] = off + float(rng.uniform(-1.5, 1.5))
+            i += m
+        return out
+    raise ValueError(f"unknown design {design!r}")
+
+
+def _closed_loop(rng: np.random.Generator, rate_hz: float, duration_s: float, noise: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """A PI loop at ``rate_hz`` on P(s) (zero-order hold) tracking random stroke steps, measured with
+    ``noise`` in the loop: (applied voltage kV, noise-free stroke mm)."""
+    num, den = paper.plant_tf()
+    a, b, c, d = signal.cont2discrete(signal.tf2ss(num, den), 1.0 / rate_hz, method="zoh")[:4]
+    n = noise.size
+    g0 = float(np.polyval(num, 0) / np.polyval(den, 0))
+    ki = 2 * math.pi * 1.0 / g0  # about a 1 Hz loop on the static gain
+    kp = 0.2 / g0
+    ref = np.empty(n)
+    i = 0
+    while i < n:
+        m = int(rng.uniform(0.5, 2.0) * rate_hz) + 1
+        ref[i:i + m] = g0 * float(rng.uniform(2.0, 6.0))
+        i += m
+    x = np.linalg.solve(np.eye(a.shape[0]) - a, b[:, 0] * ref[0] / g0)
+    integ = ref[0] / g0
+    u = np.empty(n)
+    z = np.empty(n)
+    cc, bb = c[0], b[:, 0]
+    for k in range(n):
+        z[k] = float(cc @ x)
+        e = ref[k] - (z[k] + noise[k])
+        integ += ki * e / rate_hz
+        u[k] = min(max(integ + kp * e, 0.0), 9.0)
+        x = a @ x + bb * u[k]
+    return u, z
+
+
+def _sampled(u: np.ndarray, rate_hz: float, convention: str, offset_samples: float, m: int = 8) -> np.ndarray:
+    """P(s)'s noise-free output (mm) sampled by ``convention`` and ``offset_samples`` (output late > 0)."""
+    num, den = paper.plant_tf()
+    from hasel.lti import zoh_sos
+
+    fine = (np.repeat(u, m) if convention in ("zoh", "centred")
+            else np.interp(np.arange(u.size * m) / m, np.arange(u.size), u))
+    sos = zoh_sos(num, den, 1.0 / (rate_hz * m), output="start")
+    z, _ = signal.sosfilt(sos, fine, zi=signal.sosfilt_zi(sos) * fine[0])
+    shift = (m // 2 if convention == "centred" else 0) - int(round(offset_samples * m))
+    idx = np.clip(np.arange(u.size) * m + shift, 0, z.size - 1)
+    return z[idx]
+
+
+def _coloured(rng: np.random.Generator, n: int, rate_hz: float, sd: float, kind: str) -> np.ndarray:
+    """Measurement noise of rms ``sd``: ``white``, ``coloured`` (white through a first-order low-pass at
+    2-20 Hz plus a white tenth), or ``wander`` (white plus a slow random offset drift of 2-6 x sd)."""
+    w = rng.standard_normal(n)
+    if kind == "white":
+        return sd * w
+    if kind == "coloured":
+        fc = float(rng.uniform(2.0, 20.0))
+        a = math.exp(-2 * math.pi * fc / rate_hz)
+        x = signal.lfilter([1.0 - a], [1.0, -a], w)
+        x = x / x.std()
+        return sd * (0.95 * x + 0.3 * rng.standard_normal(n))
+    if kind == "wander":
+        a = math.exp(-1.0 / (rate_hz * float(rng.uniform(5.0, 20.0))))
+        drift = signal.lfilter([1.0], [1.0, -a], rng.standard_normal(n))
+        drift = signal.detrend(drift, type="constant")
+        drift = drift / max(np.abs(drift).max(), 1e-12) * float(rng.uniform(2.0, 6.0)) * sd
+        return sd * w + drift
+    raise ValueError(f"unknown noise kind {kind!r}")
+
+
+@dataclass(frozen=True)
+class FreeCase:
+    """An effect-free log of the tuning corpus: how it was made (its file holds only the data)."""
+
+    index: int
+    design: str
+    rate_hz: float
+    convention: str
+    offset_samples: float
+    noise: str
+    noise_mm: float
+    path: str
+
+
+def make_free_case(index: int, seed: int, directory: str, *, design: str | None = None,
+                   rate_hz: float | None = None, convention: str | None = None,
+                   offset_samples: float | None = None, noise: str | None = None,
+                   duration_s: float | None = None) -> FreeCase:
+    """Write one effect-free log of P(s) (``.npz`` like :func:`make_case`) and return how it was made.
+
+    Drawn unless given: the design (:data:`FREE_DESIGNS`), the rate (200 Hz to 5 kHz), the
+    sampling convention (:data:`CONVENTIONS`), a fractional timing offset between the
+    input and output samples (-0.5 to 0.5 samples, a third of the logs none), the noise
+    (white, coloured or with a slow offset wander; 0.003-0.015 mm rms) and the length
+    (shorter at high rates). Quantised like the laser (:data:`LASER_LSB_MM`).
+    """
+    rng = np.random.default_rng(seed)
+    design = design or FREE_DESIGNS[int(rng.integers(len(FREE_DESIGNS)))]
+    rate = float(rate_hz or [200.0, 500.0, 1000.0, 2000.0, 5000.0][int(rng.integers(5))])
+    conv = convention or CONVENTIONS[int(rng.integers(len(CONVENTIONS)))]
+    off = float(offset_samples if offset_samples is not None
+                else (0.0 if rng.random() < 1 / 3 else rng.uniform(-0.5, 0.5)))
+    kind = noise or ("white", "coloured", "wander")[int(rng.integers(3))]
+    sd = float(rng.uniform(0.003, 0.015))
+    dur = float(duration_s or (40.0 if rate <= 1000.0 else 20.0))
+    n = int(round(dur * rate))
+    nz = _coloured(rng, n, rate, sd, kind)
+    if design == "closed_loop":
+        u, _ = _closed_loop(rng, rate, dur, nz)
+        conv = "zoh" if convention is None else conv  # a controller holds its command
+    else:
+        u = _design_input(design, rng, rate, dur)
+        n = u.size
+        nz = _coloured(rng, n, rate, sd, kind)
+    z = _sampled(u, rate, conv, off)
+    y = np.round((z + nz[:z.size]) / LASER_LSB_MM) * LASER_LSB_MM
+    t = np.arange(u.size) / rate
+    num, den = paper.plant_tf()
+    path = os.path.join(directory, f"free_{index:03d}.npz")
+    np.savez_compressed(path, t_s=t, voltage_kv=u, stroke_mm=y, num=num, den=den)
+    return FreeCase(index, design, rate, conv, off, kind, sd, path)
 
 
 def _draw_labels(n_cases: int, rng: np.random.Generator) -> list[tuple[tuple[str, str], ...]]:

@@ -76,11 +76,19 @@ def test_linear_sim_matches_the_frequency_response():
     num, den = [5.0, 40.0], np.polymul([1.0, 4.0], [1.0, 6.0, 225.0])
     rate, f = 400.0, 1.7
     t = np.arange(int(40 * rate)) / rate
-    y = LinearSim(num, den, rate).run(np.sin(2 * np.pi * f * t))
+    u = np.sin(2 * np.pi * f * t)
     g = tf_freqresp(num, den, [f])[0]
     tail = t > 20
-    ref = abs(g) * np.sin(2 * np.pi * f * t + np.angle(g))
-    assert np.max(np.abs(y[tail] - ref[tail])) < 2e-3 * abs(g)  # centred intervals: no half-sample lag
+    # zero-order hold by default: each sample held over its interval, the output taken at its start,
+    # i.e. the response of a sine delayed by half a sample (the hold's lag) at the sample instants
+    y = LinearSim(num, den, rate).run(u)
+    ref = abs(g) * np.sin(2 * np.pi * f * (t - 0.5 / rate) + np.angle(g))
+    assert np.max(np.abs(y[tail] - ref[tail])) < 2e-3 * abs(g)
+    # taken half a sample into the interval (centred samples, block means), there is no lag at all
+    y_c = LinearSim(num, den, rate, offset=0.5).run(u)
+    ref_c = abs(g) * np.sin(2 * np.pi * f * t + np.angle(g))
+    assert np.max(np.abs(y_c[tail] - ref_c[tail])) < 2e-3 * abs(g)
+    assert np.max(np.abs(y[tail] - ref_c[tail])) > 5e-3 * abs(g)  # the two conventions differ measurably
 
 
 def test_noise_estimate_of_white_noise_on_a_smooth_signal(rng=None):

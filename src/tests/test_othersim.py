@@ -195,3 +195,23 @@ def test_score_reveals_labels_and_counts():
     assert s["pair_both_named"] == pytest.approx(1.0) and s["pair_first_two"] == pytest.approx(0.5)
     assert s["confusion"]["time_delay"] == {"load_mass": 1}
     assert s["median_shrink"] == pytest.approx(np.median([0.4, 0.6, 0.8, 1.0]))
+
+
+def test_effect_free_logs_follow_their_sampling_convention(tmp_path):
+    from hasel import paper
+    from hasel.diagnose.prep import LinearSim
+    from hasel.othersim import make_free_case
+
+    num, den = paper.plant_tf()
+    zoh = make_free_case(0, 5, str(tmp_path), design="prbs", rate_hz=500.0, convention="zoh", offset_samples=0.0,
+                         noise="white", duration_s=10.0)
+    d = np.load(zoh.path)
+    y_zoh = LinearSim(num, den, 500.0).run(d["voltage_kv"])  # the diagnosis' own zero-order hold
+    assert np.std(d["stroke_mm"] - y_zoh) < 1.5 * zoh.noise_mm + 0.001
+    cen = make_free_case(1, 5, str(tmp_path), design="prbs", rate_hz=500.0, convention="centred",
+                         offset_samples=0.0, noise="white", duration_s=10.0)
+    c = np.load(cen.path)
+    assert np.array_equal(c["voltage_kv"], d["voltage_kv"])  # same draw, other convention
+    y_mid = LinearSim(num, den, 500.0, offset=0.5).run(c["voltage_kv"])
+    assert np.std(c["stroke_mm"] - y_mid) < 1.5 * cen.noise_mm + 0.001
+    assert np.std(c["stroke_mm"] - y_zoh) > 1.1 * np.std(c["stroke_mm"] - y_mid)  # half a sample matters on steps

@@ -117,7 +117,7 @@ class Pipeline:
     def __post_init__(self) -> None:
         self.num = np.asarray(self.num, float)
         self.den = np.asarray(self.den, float)
-        self.nominal = LinearSim(self.num, self.den, self.prep.rate_hz)
+        self.nominal = LinearSim(self.num, self.den, self.prep.rate_hz, self.prep.sample_offset)
         self.inputs = [(_shift(r.t_s, r.u, self.delay_s) if self.delay_s > 0 else r.u) for r in self.prep.records]
         self.t_dom = max(min(dominant_time_constant_s(self.den), self.span_s), 2.0 * self.prep.dt_s)
         # maps are normalised on the training samples: [-1, 1] spans their 0.5-99.5 percentiles,
@@ -153,7 +153,7 @@ class Pipeline:
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
             if mu == 0.0:
-                sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz)
+                sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz, self.prep.sample_offset)
             else:
                 p = np.roots(den)
                 if np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))):
@@ -165,7 +165,7 @@ class Pipeline:
                     p2[i] = p[i] / (1.0 + mu)
                     den2 = np.real(np.poly(p2)) * den[0]
                     den2 = den2 * (den[-1] / den2[-1])
-                sim = LinearSim(num, den2, self.prep.rate_hz)
+                sim = LinearSim(num, den2, self.prep.rate_hz, self.prep.sample_offset)
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim

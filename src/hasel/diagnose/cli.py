@@ -97,7 +97,7 @@ def _units(data: Any) -> tuple[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``hasel diagnose``; return the exit code (bad input raises :class:`BadInputError`)."""
-    from hasel.diagnose.core import DiagnoseOptions, diagnose
+    from hasel.diagnose.core import DiagnoseOptions, DiagnosisFailed, diagnose
     from hasel.io import load_io
 
     t0 = time.perf_counter()
@@ -121,7 +121,13 @@ def run(args: argparse.Namespace) -> int:
     units = _units(data)
     opts = DiagnoseOptions(max_effects=args.max_effects, identify=args.identify, target_rate_hz=args.rate,
                            progress=say)
-    v = diagnose(data.t_s, data.u, data.y, model=model, heldout=held, options=opts, units=units)
+    try:
+        v = diagnose(data.t_s, data.u, data.y, model=model, heldout=held, options=opts, units=units)
+    except DiagnosisFailed as err:
+        # still write what was measured, marked unusable, then fail with one line (exit 1)
+        if args.json:
+            _write_atomic(args.json, json.dumps(json_safe(err.payload), indent=2, allow_nan=False) + "\n")
+        raise
     out = v.to_json()
     out["signals"] = {"input": data.input_name, "output": data.output_name, "units": list(units),
                       "data": str(args.data), "heldout": str(args.heldout) if args.heldout else None}

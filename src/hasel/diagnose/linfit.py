@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize, signal
 
-from hasel.diagnose.prep import LinearSim, Prepared
+from hasel.diagnose.prep import LinearSim, Prepared, at_offset
 from hasel.errors import BadInputError
 
 __all__ = ["fit_linear"]
@@ -67,10 +67,10 @@ def _arx_poles(prep: Prepared, n: int) -> np.ndarray:
     return np.concatenate([s[np.abs(s.imag) < 1e-9], s[s.imag >= 1e-9], np.conj(s[s.imag >= 1e-9])])
 
 
-def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float) -> list[np.ndarray]:
+def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float, offset: float = 0.0) -> list[np.ndarray]:
     """Responses to ``u`` of ``1/(s - p)`` (real poles) and of the real and imaginary parts of
     ``1/(s - p)`` (one of each conjugate pair): exact ZOH recursions in closed form, started at
-    rest with ``u[0]``, output at the centres of the intervals (as :class:`LinearSim`)."""
+    rest with ``u[0]``, output ``offset`` samples into each interval (as :class:`LinearSim`)."""
     T = 1.0 / rate_hz
     ext = np.concatenate([u, u[-1:]])
     cols = []
@@ -80,7 +80,7 @@ def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float) -> list[np.
         x0 = -u[0] / p
         y = signal.lfilter([bb], [1.0, -a], ext[:-1], zi=[a * x0])[0]
         x = np.concatenate([[x0], y])
-        mid = 0.5 * (x[:-1] + x[1:])
+        mid = at_offset(x, offset)
         if abs(np.imag(p)) > 0:
             cols += [np.real(mid), np.imag(mid)]
         else:
@@ -112,7 +112,7 @@ def _solve_num(prep: Prepared, poles: np.ndarray) -> tuple[np.ndarray, float, np
     for rec in prep.records:
         if not rec.train.any():
             continue
-        B = np.column_stack(_modal_columns(mp, rec.u, prep.rate_hz) + [np.ones(rec.u.size)])
+        B = np.column_stack(_modal_columns(mp, rec.u, prep.rate_hz, prep.sample_offset) + [np.ones(rec.u.size)])
         cols_all.append(B[rec.train])
         ys.append(rec.y[rec.train])
     A, b = np.vstack(cols_all), np.concatenate(ys)
@@ -205,7 +205,7 @@ def _fit_order(prep: Prepared, n: int, init: np.ndarray | None = None,
         return num, den, np.inf
     # score the model itself (a near-singular basis can look better than the model it adds up
     # to), with its best offset
-    sim = LinearSim(num, den, prep.rate_hz)
+    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset)
     es = [(rec.y - sim.run(rec.u))[rec.train] for rec in prep.records if rec.train.any()]
     e = np.concatenate(es)
     e = e - e.mean()

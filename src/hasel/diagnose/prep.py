@@ -3,10 +3,14 @@
 Any SISO log (any units and rates) is brought to a *working rate* a few tens of times
 the excited band, by averaging blocks of samples (a boxcar: the block mean of the
 input is exactly the input held over that block, and input and output are
-filtered alike). Each working sample stands for the interval centred on it, so a
-continuous model is simulated with its input held over each interval and its output
-taken mid-interval (the mean of the states at the interval's ends): no half-sample
-delay either way, whether the samples were block means or instantaneous values.
+filtered alike). A continuous model is simulated with its input held over each working
+interval (a zero-order hold, the convention of a DAC and of this project's plant) and
+its output taken where the log's output sample lies in that interval: at its start for
+an unaveraged zero-order-hold log, ``(q - 1) / 2q`` into it for block means of ``q``
+samples (:attr:`Prepared.sample_offset`). Other conventions (a first-order hold, centred
+samples, a fractional-sample offset between the input and output clocks) shift that
+point by up to a sample; the diagnosis estimates the shift as a nuisance
+(:func:`estimate_timing`) and reports it as a timing offset, not as a delay.
 
 Held-out data come in two parts, so that the reported figures are honest: a
 *validation* part, on which the diagnosis chooses (which effect, whether to accept
@@ -25,6 +29,7 @@ band); for logs with no such band, from third differences of the residual.
 """
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 
@@ -34,8 +39,8 @@ from scipy import signal, stats
 from hasel.errors import BadInputError
 from hasel.lti import zoh_sos
 
-__all__ = ["Record", "Prepared", "LinearSim", "prepare", "estimate_noise", "excited_band_hz",
-           "dominant_time_constant_s", "nrmse", "flat_extremes"]
+__all__ = ["Record", "Prepared", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
+           "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
 
 
 def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
@@ -87,6 +92,10 @@ class Prepared:
         Upper edge of the input's excited band, Hz.
     split : str
         How the held-out part was chosen.
+    sample_offset : float
+        Where in its working interval each output sample is taken, working samples (see
+        :class:`LinearSim`): ``(q - 1) / 2q`` for block means of ``q`` samples of a
+        zero-order-hold log; the diagnosis refines it as a nuisance (a timing offset).
     """
 
     records: list[Record]
@@ -95,6 +104,7 @@ class Prepared:
     f_excited_hz: float
     split: str
     info: dict = field(default_factory=dict)
+    sample_offset: float = 0.0
 
     @property
     def dt_s(self) -> float:
@@ -259,7 +269,9 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         samples, up to 240 blocks. With a separate held-out log, the same blocks of the
         first log, the held-out ones validating.
     max_samples : int
-        Cap on working samples (the rate is lowered, never below 8 times the band).
+        Cap on working samples: the rate is lowered, never below 8 times the band; beyond
+        that only the first ``max_samples`` working samples are diagnosed
+        (``info["truncated_to_s"]`` says how many seconds).
 
     Returns
     -------
@@ -287,6 +299,12 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
             raise BadInputError(f"the held-out log is sampled at {fsh:g} Hz, the log at {fs:g} Hz; they must match")
         hold_log = (th, uh, yh)
     tw, uw, yw = _block_mean(t, q), _block_mean(uu, q), _block_mean(yy, q)
+    truncated = None
+    if target_rate_hz is None and tw.size > max_samples:
+        # the band does not allow a lower rate: diagnose the first max_samples working samples only
+        # (every simulation runs over the whole record, so time grows with its length)
+        truncated = float(tw[max_samples - 1] - tw[0])
+        tw, uw, yw = tw[:max_samples], uw[:max_samples], yw[:max_samples]
     if hold_log is None:
         # blocks of about a dozen samples in short logs (an event such as a single step is then
         # shared by training and held-out data), up to 240 blocks in long ones
@@ -303,12 +321,24 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         th, uh, yh = (_block_mean(x, q) for x in hold_log)
         records.append(Record(th, uh, yh, np.zeros(th.size, bool), np.ones(th.size, bool)))
         split = "separate held-out log"
+    # block means of q instantaneous samples of a zero-order-hold log: the output sits (q - 1) / 2
+    # original samples into the interval over which the block's mean input is held
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
-                    info={"original_rate_hz": fs, "n_original": int(t.size)})
+                    info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
+                    sample_offset=(q - 1) / (2.0 * q))
 
 
 class LinearSim:
-    """Simulate a continuous transfer function on working-rate samples (centred intervals).
+    """Simulate a continuous transfer function on working-rate samples (input held over each interval).
+
+    The input sample ``u[k]`` is held over the interval ``[t_k, t_{k+1})`` (a zero-order
+    hold, as a DAC or a controller holding its command). The output sample ``k`` is the
+    continuous output at ``t_k + offset dt``: ``offset = 0`` is the plain zero-order-hold
+    convention (output sampled when input ``k`` starts, so it depends on inputs before
+    ``k`` only); ``0.5`` is centred on the interval (block means, or a first-order hold,
+    which leads a held input by half a sample); negative values sample earlier (an output
+    that lags). Between the interval's ends the output is interpolated linearly, exact
+    to second order at working rates many times the band.
 
     Parameters
     ----------
@@ -316,9 +346,11 @@ class LinearSim:
         The model, descending powers of s.
     rate_hz : float
         Working rate, Hz.
+    offset : float
+        Where in the interval the output is taken, in working samples (-1 to 1).
     """
 
-    def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float) -> None:
+    def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float, offset: float = 0.0) -> None:
         num = np.atleast_1d(np.asarray(num, float))
         den = np.atleast_1d(np.asarray(den, float))
         if num.size > den.size:
@@ -327,7 +359,9 @@ class LinearSim:
         if np.any(np.real(p) >= 0):
             raise BadInputError("the nominal model must be stable (all poles in the left half-plane) "
                                 f"to be simulated; poles {np.round(p, 4).tolist()}")
-        self.num, self.den = num, den
+        if not (math.isfinite(offset) and -1.0 <= offset <= 1.0):
+            raise BadInputError(f"the output sampling offset must be within one sample, got {offset}")
+        self.num, self.den, self.offset = num, den, float(offset)
         self.dc_gain = float(np.polyval(num, 0.0) / np.polyval(den, 0.0))
         num = np.trim_zeros(num, "f") if np.any(num) else num[-1:]
         try:
@@ -346,12 +380,57 @@ class LinearSim:
                 raise BadInputError("the model cannot be discretised at the working rate (non-finite result)")
         self._zi = signal.sosfilt_zi(self.sos)
 
-    def run(self, u: np.ndarray) -> np.ndarray:
-        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before)."""
+    def run_start(self, u: np.ndarray) -> np.ndarray:
+        """Output at the interval starts, ``n + 1`` samples (the last one after ``u[-1]``'s interval)."""
         u = np.asarray(u, float)
         x = np.concatenate([u, u[-1:]])
         ys, _ = signal.sosfilt(self.sos, x, zi=self._zi * u[0])
-        return 0.5 * (ys[:-1] + ys[1:])
+        return ys
+
+    def run(self, u: np.ndarray) -> np.ndarray:
+        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before)."""
+        return at_offset(self.run_start(u), self.offset)
+
+
+def at_offset(ys: np.ndarray, offset: float) -> np.ndarray:
+    """Samples ``k + offset`` (``-1 <= offset <= 1``) of ``n + 1`` interval-start outputs ``ys``, ``n`` values.
+
+    Linear interpolation between neighbours; before the first sample the output is at rest.
+    """
+    if offset >= 0.0:
+        return ys[:-1] + offset * (ys[1:] - ys[:-1])
+    prev = np.concatenate([ys[:1], ys[:-2]])
+    return ys[:-1] + offset * (ys[:-1] - prev)
+
+
+def estimate_timing(ys: np.ndarray, y: np.ndarray, mask: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
+    """Output sampling offset (working samples, within ``[lo, hi]``) that best fits ``y`` on ``mask``.
+
+    ``ys`` are the model's interval-start outputs (``n + 1``, see :meth:`LinearSim.run_start`),
+    ``y`` the measured output; an output offset is fitted alongside (a nuisance too). The
+    model output is piecewise linear in the offset (one line for each sign), so each side
+    is a closed-form least-squares fit, clamped to the bounds.
+
+    Returns
+    -------
+    (offset, sse) : the offset and the residual sum of squares there.
+    """
+    best = (0.0, float("inf"))
+    for side_lo, side_hi in ((max(lo, 0.0), hi), (lo, min(hi, 0.0))):
+        if side_lo > side_hi:
+            continue
+        a_mid = 0.5 * (side_lo + side_hi)
+        base = at_offset(ys, 0.0)[mask]
+        d = (at_offset(ys, 1.0 if a_mid >= 0 else -1.0)[mask] - base) * (1.0 if a_mid >= 0 else -1.0)
+        r = y[mask] - base
+        rc, dc = r - r.mean(), d - d.mean()
+        a = float(rc @ dc / max(dc @ dc, 1e-300))
+        a = min(max(a, side_lo), side_hi)
+        e = rc - a * dc
+        sse = float(e @ e)
+        if sse < best[1]:
+            best = (a, sse)
+    return best
 
 
 def estimate_noise(r: np.ndarray, rate_hz: float, f_excited_hz: float) -> tuple[float, str]:
@@ -373,3 +452,42 @@ def estimate_noise(r: np.ndarray, rate_hz: float, f_excited_hz: float) -> tuple[
         return float(np.median(p[band]) / bias * rate_hz / 2.0), "spectral"
     d3 = np.diff(r, 3)
     return float(np.var(d3) / 20.0), "differences"
+
+
+def noise_trust(r: np.ndarray, rate_hz: float, f_excited_hz: float, sigma2: float, method: str) -> dict:
+    """How far to trust a noise estimate ``sigma2`` of residual ``r`` (the verdict's ``noise`` entry).
+
+    Two checks of the white-noise assumption behind the estimate: the slope of the residual's
+    spectrum over the band above the excitation (coloured noise rises towards the band, so
+    the level above it under-states the noise in it), and the slow part of the residual
+    (a moving average over a second: a sensor offset wander or a drift, which no spectral
+    level above the band sees). Either makes the floor a lower bound; effects are then
+    accepted only on the held-out block test, which does not use the floor.
+    """
+    r = signal.detrend(np.asarray(r, float))
+    out = {"estimator": {"spectral": "median residual spectrum above 3x the excited band (white noise assumed)",
+                         "differences": "variance of third differences / 20 (white noise on a smooth signal; an "
+                                        "upper bound otherwise)"}.get(method, method),
+           "rms": math.sqrt(max(sigma2, 0.0)), "repeats_used": False}
+    notes = []
+    nper = int(min(r.size, 1024))
+    f, p = signal.welch(r, fs=rate_hz, nperseg=nper)
+    lo = (f >= 3.0 * f_excited_hz) & (f < 6.0 * f_excited_hz)
+    hi = f >= 0.5 * f.max()
+    if method == "spectral" and lo.sum() >= 3 and hi.sum() >= 3:
+        ratio = float(np.median(p[lo]) / max(np.median(p[hi]), 1e-300))
+        out["spectrum_slope_ratio"] = ratio
+        if ratio > 2.0:
+            notes.append(f"the noise is coloured (its spectrum just above the band is {ratio:.3g} x its level at "
+                         f"the top): the floor under-states the noise in the band")
+    n = max(1, int(round(rate_hz)))
+    if r.size > 4 * n:
+        slow = np.convolve(r, np.ones(n) / n, mode="valid")
+        slow_ratio = float(np.var(slow) / max(sigma2 / n, 1e-300))
+        out["slow_over_white"] = slow_ratio
+        if slow_ratio > 20.0 and float(np.var(slow)) > 0.1 * sigma2:
+            notes.append("the residual has a slow part well above what white noise gives (a sensor offset wander "
+                         "or a drift): the floor leaves it out")
+    out["trust"] = "low: " + "; ".join(notes) if notes else "good: the residual above the band is white and has no " \
+                                                            "slow excess"
+    return out

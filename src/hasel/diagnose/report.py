@@ -25,16 +25,45 @@ __all__ = ["write_report", "verdict_lines"]
 
 
 def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
-    """A short plain-text summary of a verdict (the CLI prints it)."""
+    """A short plain-text summary of a verdict (the CLI prints it), every figure from the verdict's JSON."""
     h = v.heldout
+    floor = v.noise_floor_nrmse
     lines = [f"held-out NRMSE: nominal {h['nrmse_nominal']:.4f} -> augmented {h['nrmse_augmented']:.4f} "
-             f"(noise floor {v.noise_floor_nrmse:.4f}; gap shrink {100 * h['gap_shrink']:.0f} %)"]
+             f"(noise floor {floor:.4f}; gap shrink {_share(h['gap_shrink'])})"]
+    tm = getattr(v, "timing_offset", {}) or {}
+    if tm.get("original_samples"):
+        lines.append(f"timing offset (a sampling convention, not physics): the output lags the zero-order-hold "
+                     f"convention by {tm['original_samples']:+.2f} samples ({1e3 * tm['seconds']:+.3g} ms)")
+    test = getattr(v, "test", {}) or {}
+    over = h["nrmse_nominal"] / floor if floor > 0 else float("inf")
     if not v.effects:
-        lines.append("no effect named: the nominal model explains the data down to the noise, or no "
-                     "augmentation helps significantly")
+        if test.get("max_effects") == 0:
+            lines.append(f"no effect searched (--max-effects 0); the nominal model is {over:.3g} x the noise floor")
+        elif over <= 1.1:
+            lines.append("no effect named: the nominal model explains the held-out data down to the noise floor")
+        else:
+            lines.append(f"no effect named: the nominal model is {over:.3g} x the noise floor, but no augmentation "
+                         f"passed the held-out test")
     for i, e in enumerate(v.effects, 1):
         lines.append(f"{i}. {e['name']} (NRMSE after {e['nrmse_after']:.4f}): {e['evidence']}")
+    for d in getattr(v, "dropped", []) or []:
+        lines.append(f"dropped: {d['name']} ({d['reason']}; final held-out NRMSE {d['final_nrmse_with']:.4f} with "
+                     f"it, {d['final_nrmse_without']:.4f} without)")
+    for a in getattr(v, "ambiguous", []) or []:
+        g = a["gap_removed"]
+        lines.append(f"cannot separate: {a['chosen']} (removes {_share(g['chosen'])}) and {a['alternative']} "
+                     f"(removes {_share(g['alternative'])}) score alike; to tell them apart: {a['experiment']}")
+    if test.get("false_alarm_rate"):
+        lines.append(f"test: {test['false_alarm_rate']}")
     return lines
+
+
+def _share(x: float) -> str:
+    """A share as a percentage (never a bare "0 %")."""
+    x = float(x)
+    if abs(x) < 0.005:
+        return "less than 0.5 %" if x >= 0 else "a negative share"
+    return f"{100 * x:.0f} %"
 
 
 def _fig(path: Path):
