@@ -33,6 +33,9 @@ __all__ = ["ModelCheck", "check_model", "check_model_json", "MARGINAL_DAMPING", 
 MARGINAL_DAMPING = 0.005
 #: Damping ratio below which a pole or zero outside the excited band is unsupported.
 LIGHT_DAMPING = 0.05
+#: Without a static map, the excited band must start below this fraction of the slowest pole's
+#: frequency for G(0) to count as measured (|G| is within 2 % of G(0) there for a real pole).
+STATIC_BAND_FRACTION = 0.2
 #: Smallest relative tolerance of G(0) against the static map's slope (3 %, 0.26 dB).
 DC_REL_TOL = 0.03
 #: Default threshold of the held-out compare fit, percent.
@@ -158,6 +161,15 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
                            f"{static_slope:.4g} (tolerance {tol:.2g})")
             fixes.append("hold the input at 3 or more levels (offsets or steps, each longer than the settling "
                          "time) and excite down to lower frequencies")
+    elif band_hz is not None and poles.size:
+        # nothing measured the static gain: the excited band must then reach well below the slowest pole,
+        # where |G| is already G(0), or G(0) is an extrapolation the data never saw
+        f_slow = min(hz(p) for p in poles)
+        if band_hz[0] > STATIC_BAND_FRACTION * f_slow:
+            reasons.append(f"nothing pins the static gain: no static map levels, and the excited band starts at "
+                           f"{band_hz[0]:.3g} Hz, above {STATIC_BAND_FRACTION:g} x the slowest pole ({f_slow:.3g} Hz)")
+            fixes.append(f"hold the input at 3 or more levels, or excite down to "
+                         f"{STATIC_BAND_FRACTION * f_slow:.3g} Hz")
     if heldout_nrmse is not None:
         pct = 100.0 * (1.0 - heldout_nrmse) if math.isfinite(heldout_nrmse) else -math.inf
         details.update(heldout_compare_fit_pct=pct if math.isfinite(pct) else None,
