@@ -1,6 +1,8 @@
 """MCAP recording of a graph run, reading it back, and replay through the driver and filter."""
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 import rclpy
@@ -15,6 +17,12 @@ from hasel_ros.rosutil import topic_qos
 from hasel_msgs.msg import Stroke
 from hasel_sysid.replay import Replayer, read_raw
 from hasel_sysid.steps import run_steps
+
+
+def default_sigint() -> None:
+    """In the child: SIGINT back to its default. A test run started in a script's background has SIGINT
+    ignored, and children inherit that (the convention the commands keep); these tests send it on purpose."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +97,6 @@ def test_replaying_raw_timing_through_driver_and_filter_reproduces_the_filtered_
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
 def test_hasel_record_stopped_by_a_signal_leaves_a_complete_file(tmp_path, sig):
     import os
-    import signal
     import subprocess
     import time
     from pathlib import Path
@@ -98,7 +105,7 @@ def test_hasel_record_stopped_by_a_signal_leaves_a_complete_file(tmp_path, sig):
 
     out = tmp_path / "rec.mcap"
     hasel = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "hasel"
-    proc = subprocess.Popen([str(hasel), "record", "-o", str(out), "--topics", "/sig_test"], env=dict(os.environ),
+    proc = subprocess.Popen([str(hasel), "record", "-o", str(out), "--topics", "/sig_test"], env=dict(os.environ), preexec_fn=default_sigint,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ctx = Context()
     rclpy.init(context=ctx)

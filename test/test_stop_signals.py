@@ -19,6 +19,12 @@ ROOT = Path(__file__).resolve().parents[1]
 HASEL = str(ROOT / ".venv" / "bin" / "hasel")
 
 
+def default_sigint() -> None:
+    """In the child: SIGINT back to its default. A test run started in a script's background has SIGINT
+    ignored, and children inherit that (the convention the commands keep); these tests send it on purpose."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _env() -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k != "HASEL_ROS_ENV_READY"}
 
@@ -60,7 +66,7 @@ COMMANDS = {
                                          ("SIGTERM", "chirp"), ("SIGHUP", "chirp")])
 def test_a_signal_mid_run_closes_the_file_and_exits_128_plus_the_signal(tmp_path, sig, command):
     out = tmp_path / "run.mcap"
-    proc = subprocess.Popen([HASEL, *[a.format(out=out) for a in COMMANDS[command]]], env=_env(),
+    proc = subprocess.Popen([HASEL, *[a.format(out=out) for a in COMMANDS[command]]], env=_env(), preexec_fn=default_sigint,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_for(out, proc, min_bytes=200_000)  # a few chunks written: mid-run
@@ -105,7 +111,7 @@ def test_in_the_background_of_a_script_sigint_is_ignored_and_sigterm_stops_clean
 
 def test_hasel_record_stopped_by_sighup_leaves_a_complete_file(tmp_path):
     out = tmp_path / "rec.mcap"
-    proc = subprocess.Popen([HASEL, "record", "-o", str(out), "--topics", "/nothing_here"], env=_env(),
+    proc = subprocess.Popen([HASEL, "record", "-o", str(out), "--topics", "/nothing_here"], env=_env(), preexec_fn=default_sigint,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_for(out, proc)  # the header is on disk: the recorder runs
