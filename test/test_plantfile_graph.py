@@ -13,6 +13,7 @@ from hasel import paper
 from hasel.cli import main as hasel_main
 from hasel.loop import LoopConfig, run_closed_loop, step_reference
 from hasel.metrics import steps_from_sequence
+from hasel.plantfile import PlantFileError, read_plant
 from hasel.plantspec import from_file, make_actuator
 from hasel.signals import protocol_schedule
 from hasel.simulator import PlantSimulator
@@ -100,17 +101,43 @@ def _bad_file(tmp_path, key):
 
 
 @pytest.mark.parametrize("key", sorted(BAD))
-def test_malformed_file_is_refused_by_steps_and_by_the_node_with_one_line(tmp_path, key):
+def test_malformed_file_is_refused_by_steps_and_by_the_node_with_the_same_line(tmp_path, key, capsys):
+    import rclpy
+    from rclpy.parameter import Parameter
+    from sim_plant.plant_node import PlantNode
+
     path = _bad_file(tmp_path, key)
+    with pytest.raises(PlantFileError) as err:
+        read_plant(path)
+    line = str(err.value)
+    assert "\n" not in line and BAD[key][1] in line and str(path) in line
+    assert hasel_main(["steps", "--plant", str(path), "--hold", "0.1"]) == 2
+    err_lines = capsys.readouterr().err.strip().splitlines()
+    assert len(err_lines) == 1 and err_lines[0].endswith(f"error: {line}"), err_lines
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        with pytest.raises(PlantFileError) as node_err:  # refused while being built: no publisher exists yet
+            PlantNode(context=ctx, parameter_overrides=[Parameter("model_file", value=str(path))])
+        assert str(node_err.value) == line
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
+def test_the_plant_node_process_exits_2_with_one_line_on_a_malformed_file(tmp_path):
+    path = _bad_file(tmp_path, "unstable")
     env = {k: v for k, v in os.environ.items() if k != "HASEL_ROS_ENV_READY"}
-    steps = subprocess.run([HASEL, "steps", "--plant", str(path), "--hold", "0.1"],
-                           capture_output=True, text=True, timeout=120, env=env)
-    assert steps.returncode == 2, steps.stderr
-    lines = steps.stderr.strip().splitlines()
-    assert len(lines) == 1 and BAD[key][1] in lines[0] and str(path) in lines[0], steps.stderr
     node = subprocess.run([HASEL, "env", "--", str(ROOT / "install" / "sim_plant/lib/sim_plant/plant"),
                            "--ros-args", "-p", f"model_file:={path}"], capture_output=True, text=True, timeout=60,
                           env=env)
     assert node.returncode == 2, node.stderr
-    nlines = node.stderr.strip().splitlines()
-    assert len(nlines) == 1 and lines[0].split(": ", 1)[1] in nlines[0], node.stderr
+    assert node.stderr.strip().splitlines() == [f"error: {read_plant_error(path)}"]
+
+
+def read_plant_error(path) -> str:
+    """The reader's one line for ``path``."""
+    try:
+        read_plant(path)
+    except PlantFileError as err:
+        return str(err)
+    raise AssertionError(f"{path} was accepted")
