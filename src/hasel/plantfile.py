@@ -36,7 +36,7 @@ import numpy as np
 from hasel.errors import BadInputError
 
 __all__ = ["FORMAT", "VERSION", "PlantFileError", "EffectEntry", "PlantModel", "parse_plant", "read_plant",
-           "write_plant", "truth_order", "looks_like_path"]
+           "write_plant", "truth_order", "looks_like_path", "from_verdict", "export_plant"]
 
 FORMAT = "hasel-plant"
 VERSION = 1
@@ -356,3 +356,38 @@ def looks_like_path(spec: str) -> bool:
     s = spec.strip()
     return s not in ("nominal", "truth") and not s.startswith("truth:") and (
         s.endswith(".json") or "/" in s or Path(s).exists())
+
+
+def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantModel:
+    """The augmented model of a ``hasel diagnose`` verdict as a :class:`PlantModel` (fitted forms).
+
+    The transfer function is the diagnosis's linear part (re-identified through the input-side
+    effects if it was), with the nominal model's dead time; the effects are the named ones,
+    in chain order, with the scales the diagnosis normalised them by. The data must be in
+    the graph's units (kV in, mm out): fitted parameters are not converted.
+    """
+    from hasel.diagnose.augment import split_linear
+    from hasel.effects.base import LINEAR
+    from hasel.effects.drift import smoothing_s
+    from hasel.effects.registry import FAMILIES
+
+    if tuple(units) != ("kV", "mm"):
+        raise PlantFileError(f"--export-plant needs the data in kV (input) and mm (output), got {units[0] or '?'} "
+                             f"and {units[1] or '?'} (name the signals ..._kv and ..._mm)")
+    pipe, current = verdict.plots["pipe"], verdict.plots["current"]
+    num, den = (split_linear(current[LINEAR]) if LINEAR in current else (pipe.num, pipe.den))
+    fits = sorted((f for n, f in current.items() if n != LINEAR), key=lambda f: f.slot)
+    effects = tuple(EffectEntry(f.name, dict(zip(FAMILIES[f.name].param_names(f), map(float, f.theta))),
+                                "fitted", f.variant) for f in fits)
+    scales = {"u_c": float(pipe.u_c), "u_s": float(pipe.u_s), "y_c": float(pipe.y_c), "y_s": float(pipe.y_s),
+              "thresholds": [float(r) for r in pipe.thresholds], "tau_smooth_s": float(smoothing_s(pipe))}
+    model = PlantModel(tuple(map(float, num)), tuple(map(float, den)), float(pipe.delay_s), effects,
+                       scales if effects else {},
+                       extra={"tool": "hasel diagnose --export-plant",
+                              "heldout": {k: verdict.heldout.get(k) for k in ("nrmse_nominal", "nrmse_augmented")}})
+    return parse_plant(model.to_json(), "(exported)")  # the writer's output must read back
+
+
+def export_plant(verdict: Any, path: str | Path, units: tuple[str, str] = ("kV", "mm")) -> Path:
+    """Write the verdict's augmented model as a plant file at ``path`` (see :func:`from_verdict`)."""
+    return write_plant(path, from_verdict(verdict, units))
