@@ -6,8 +6,11 @@
   chain and stages as ``--plant truth:...``).
 - Fitted forms: :class:`FittedChain`, the diagnosis's chain (delay, input clip or slew
   limit, input map, hysteresis, P(s) with load, internal map, asymmetric lag or speed
-  limit, drift, output clip, sensor map, measured clip) run by each family's own chunked
-  stage (:meth:`hasel.effects.base.EffectFamily.stage`), driven by the applied voltage.
+  limit, drift, output clip, sensor map) run by each family's own chunked stage
+  (:meth:`hasel.effects.base.EffectFamily.stage`), driven by the applied voltage. A
+  *measured* clip (the range of the sensor that recorded the data, e.g. a laser reading
+  nothing below 0 mm) is not part of the actuator: the simulated sensors have their own
+  range, and the true stroke is not clipped by a sensor.
 
 The file's dead time delays the stroke (for the linear part, the same as delaying
 P(s)'s input), through the time-delay family's stage.
@@ -80,7 +83,6 @@ class FittedChain:
         self._drift = stage("charge_drift")
         self._sat_out = stage("saturation", "output")
         self._sensor = stage("sensor_nonlinearity")
-        self._sat_meas = stage("saturation", "measured")
         amp_num, amp_den = amplifier_filter_tf(config.amp_filter_hz)
         self._amp = SosFilter(zoh_sos(amp_num, amp_den, dt, output="end"))
         # the input-side stages sit between the amplifier and P(s): P(s) then sees the applied
@@ -111,8 +113,7 @@ class FittedChain:
         if self._drift is not None:
             self._drift.reset(y)
         y = _rest(self._sat_out, y)
-        y = _rest(self._sensor, y)
-        _rest(self._sat_meas, y)
+        _rest(self._sensor, y)
 
     def run(self, command_kv: np.ndarray) -> ActuatorSamples:
         """Advance by the samples of ``command_kv`` (kV, at ``rate_hz``)."""
@@ -136,7 +137,7 @@ class FittedChain:
             y = y if st is None else st.run(y)
         if self._drift is not None:
             y = self._drift.run(y, x_sat)
-        for st in (self._sat_out, self._sensor, self._sat_meas):
+        for st in (self._sat_out, self._sensor):
             y = y if st is None else st.run(y)
         return ActuatorSamples(applied_kv=applied, stroke_mm=y)
 
