@@ -129,7 +129,11 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError(f"--calibration file not found: {args.calibration}")
     from sim_plant.plant_node import make_actuator
 
-    reach = reach_mm(make_actuator(args.plant))  # unknown variant: a clear error before any ROS work
+    from hasel.plantfile import looks_like_path
+
+    if looks_like_path(args.plant):  # a plant-model file: the nodes get its absolute path
+        args.plant = str(Path(args.plant).resolve())
+    reach = reach_mm(make_actuator(args.plant))  # unknown variant or bad file: a clear error before any ROS work
     low = min(seq)
     if low < 0:
         raise BadInputError(f"--sequence: {low:g} mm is below 0 mm, the stroke at 0 kV (the amplifier's floor)")

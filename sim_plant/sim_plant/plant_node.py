@@ -22,7 +22,10 @@ Clock modes (parameter ``clock_mode``):
   controller and stays deterministic.
 - ``wall``: a steady timer steps the plant in real time with the latest command.
 
-Plant variants are pluggable (parameter ``variant``): see :func:`make_actuator`.
+Plant variants are pluggable (parameter ``variant``): see :func:`make_actuator`; parameter
+``model_file`` runs a plant-model file instead (:mod:`hasel.plantfile`: e.g. ``model.json``
+from ``hasel identify`` or ``hasel diagnose --export-plant``). A malformed file stops the
+node at start with one line and exit code 2, before it publishes anything.
 """
 from __future__ import annotations
 
@@ -68,6 +71,9 @@ class PlantNode(Node):
         variant = declare(self, "variant", "nominal",
                           "plant model: nominal | truth | truth:EFFECT(param=value)+... (unmodelled effects)",
                           read_only=True)
+        model_file = declare(self, "model_file", "",
+                             "plant-model file (hasel-plant JSON or identify's model.json); empty: use variant",
+                             read_only=True)
         seed = declare(self, "seed", 0, "seed of the sensor noise", lo=0, hi=2**31 - 1, read_only=True)
         period = declare(self, "period_s", paper.LOOP_PERIOD_S, "loop period, s", lo=1e-4, hi=1.0, read_only=True)
         laser_noise = declare(self, "laser_noise_mm", LaserConfig().noise_mm, "laser noise (std), mm",
@@ -83,7 +89,9 @@ class PlantNode(Node):
                                  lo=-1.0, hi=1e9)
         autostart = declare(self, "autostart", True, "start stepping by itself (sim mode)")
         self.publish_batch = declare(self, "publish_batch", True, "publish the 10 kHz samples")
-        act = actuator or make_actuator(variant)
+        if model_file and variant != "nominal" and actuator is None:
+            raise BadInputError(f"give either model_file ({model_file}) or variant ({variant}), not both")
+        act = actuator or (plantspec.from_file(model_file) if model_file else make_actuator(variant))
         self.sim = PlantSimulator(act, period_s=period, seed=seed, laser=LaserConfig(noise_mm=laser_noise),
                                   strain=StrainConfig(noise_us=strain_noise, noise_us_per_kv=strain_noise_kv),
                                   strain_curve=getattr(act, "strain_curve", None))

@@ -6,8 +6,9 @@ effects the paper itself reports: relaxation slower and more damped than activat
 (electrostatic zipping), and a strain-sensor calibration curve with small offsets
 at 2 and 4 mm. ``truth:...`` picks effects and parameters explicitly, e.g.
 ``truth:asymmetric_dynamics(tau_relax_s=0.06)+time_delay(delay_s=0.004)``; names and
-parameters are those of :mod:`hasel.effects`. Used by the plant node's ``variant``
-parameter and every ``--plant`` option.
+parameters are those of :mod:`hasel.effects`. Anything else is a plant-model file
+(:mod:`hasel.plantfile`: a path, e.g. ``model.json`` from ``hasel identify``). Used by
+the plant node's ``variant`` and ``model_file`` parameters and every ``--plant`` option.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import re
 from hasel.errors import BadInputError
 from hasel.plant import Actuator, NominalActuator
 
-__all__ = ["PAPER_TRUTH", "parse_effects", "make_actuator", "describe"]
+__all__ = ["PAPER_TRUTH", "parse_effects", "make_actuator", "from_file", "describe"]
 
 #: The effects of the paper's actuator that its linear model leaves out (name, params).
 PAPER_TRUTH: tuple[tuple[str, dict], ...] = (
@@ -71,11 +72,27 @@ def make_actuator(variant: str) -> Actuator:
             return TruthActuator([from_name(name, **params) for name, params in items])
         except TypeError as err:
             raise BadInputError(f"bad effect parameters in {variant!r}: {err}") from err
-    raise BadInputError(f"unknown plant {variant!r}; use nominal, truth, or truth:EFFECT(param=value)+...")
+    from hasel.plantfile import looks_like_path
+
+    if looks_like_path(v):
+        return from_file(v)
+    raise BadInputError(f"unknown plant {variant!r}; use nominal, truth, truth:EFFECT(param=value)+..., "
+                        "or a plant-model file (a path ending in .json)")
+
+
+def from_file(path: str) -> Actuator:
+    """The actuator of the plant-model file at ``path`` (:class:`hasel.plantfile.PlantFileError` if malformed)."""
+    from hasel.plantchain import build_actuator
+    from hasel.plantfile import read_plant
+
+    return build_actuator(read_plant(path))
 
 
 def describe(actuator: Actuator) -> str:
     """A one-line description of an actuator model (for logs)."""
+    own = getattr(actuator, "describe", None)
+    if callable(own):
+        return own()
     effects = getattr(actuator, "effects", None)
     if not effects:
         return "nominal P(s)"

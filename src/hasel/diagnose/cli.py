@@ -44,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=None, metavar="HZ",
                    help="working rate, Hz (default: about 25 times the input's band)")
     p.add_argument("--max-effects", type=int, default=3, metavar="N", help="most effects named (default 3)")
+    p.add_argument("--export-plant", metavar="FILE.json", help="write the augmented model as a plant-model file")
 
 
 def json_safe(obj: Any) -> Any:
@@ -131,6 +132,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         _write_atomic(args.json, json.dumps(json_safe(out), indent=2, allow_nan=False) + "\n")
         say(f"wrote {args.json}")
+    if getattr(args, "export_plant", None):
+        from hasel.plantfile import export_plant
+
+        say(f"wrote {export_plant(v, args.export_plant, units)}")
     if args.export_sim:
         ex = v.export
         rows = np.column_stack([ex["t_s"], ex["measured"], ex["nominal"], ex["augmented"]])
