@@ -920,15 +920,17 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         if rd is not None:
             dep = _with_residual_test(dep, rd)
     # a static map that does not pin the gain (too few levels, a standard error above 10 %, or levels that
-    # are only the means of pieces of one excitation: spanning less than a quarter of the input's range,
-    # they carry the dynamics' transients and leakage, not the static gain) is not checked
+    # are only the means of pieces of one excitation: closer together than the excitation's own swing
+    # (2 rms, 1.4 amplitudes of a sine), their means carry the dynamics' transients and leakage, not the
+    # static gain) is not checked
     levels = [float(mu) for mu, _ in fr.means]
     spread = (max(levels) - min(levels)) if levels else 0.0
+    swing = 2.0 * float(np.median([np.std(uu[s.i0:s.i1]) for s in segs])) if segs else 0.0
     informative = (math.isfinite(slope0) and static_ci is not None and static_ci <= 0.1 * abs(slope0)
-                   and spread >= 0.25 * float(np.ptp(np.asarray(u, dtype=float))))
+                   and spread >= swing)
     if not informative:
         notes.append("the static map does not pin the static gain (fewer than three levels, a slope error "
-                     "above 10 %, or levels spanning less than a quarter of the input's range): G(0) was not "
+                     "above 10 %, or levels closer together than the excitation's swing): G(0) was not "
                      "checked against it")
     check = check_model(model, band_hz=band, static_slope=slope0 if informative else None,
                         static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
