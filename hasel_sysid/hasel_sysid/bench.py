@@ -54,6 +54,9 @@ Figures (each measured against its baseline in the same run where one exists):
    ``info``) for a bounded time: cases, hangs, crashes other than
    DataFileError/BadInputError, peak memory. Failing inputs are kept in
    ``bench_fuzz_failures/`` beside the JSON file.
+9. Identification and diagnosis on the verification corpus (``bench/verify``, written
+   without reading the analysis code; no threshold tuned on it): generated from its
+   seed, scored black-box by its own scorer; the issue's figures per corpus.
 
 Executors, and why:
 
@@ -88,6 +91,7 @@ import json
 import math
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -103,7 +107,7 @@ __all__ = ["add_arguments", "run", "Row", "format_table", "FIGURES"]
 #: Figure numbers and what they measure (``--only`` takes the numbers).
 FIGURES = {1: "graph in simulated time", 2: "offline core loop", 3: "real time 200 Hz",
            4: "scale", 5: "identification and recording", 6: "diagnosis blind check",
-           7: "200 Hz under load", 8: "loader fuzzing"}
+           7: "200 Hz under load", 8: "loader fuzzing", 9: "verification corpus (untuned)"}
 
 
 @dataclass
@@ -481,6 +485,67 @@ def _fig6_foreign(b: _Bench, pct: Callable[[float | None], str]) -> None:
           f"{s.get('seconds_per_case') or math.nan:.1f} s", "-", None, "-", None)
 
 
+def _fig9(b: _Bench) -> None:
+    """Identification and diagnosis on the verification corpus (``bench/verify``), on which no threshold
+    was tuned: generated from its seed, then scored black-box by its own scorer (exit codes and JSON only).
+    """
+    from hasel.rosenv import workspace_root
+
+    root = workspace_root()
+    here = root / "bench" / "verify" if root is not None else None
+    if here is None or not (here / "score.py").is_file():
+        raise FileNotFoundError("bench/verify is not in this workspace (it lives in the repository, not the install)")
+    quick = ["--quick"] if b.quick else []
+    with tempfile.TemporaryDirectory(prefix="hasel-verify-") as tmp:
+        b.say(f"9: generating the verification corpus{' (quick subset)' if b.quick else ''}")
+        subprocess.run([sys.executable, str(here / "gen.py"), "--out", tmp, *quick], check=True,
+                       stdout=subprocess.DEVNULL)
+        b.say("9: scoring it black-box (hasel identify / diagnose in subprocesses, 2 jobs)")
+        subprocess.run([sys.executable, str(here / "score.py"), "--corpus", tmp, "--jobs", "2", *quick,
+                        "--hasel", str(root / ".venv" / "bin" / "hasel")], check=True, stdout=subprocess.DEVNULL)
+        s = json.loads(Path(tmp, "score.json").read_text())
+        b.reports.append("verification corpus (untuned):\n" + Path(tmp, "score.md").read_text())
+    for key in ("diagnose", "ident"):
+        for c in s.get(key, {}).get("cases", []):
+            c.pop("stderr", None)
+    b.results["9_verify"] = s
+
+    def frac(a, n):
+        return f"{a}/{n}" if n else "-"
+
+    d, i = s.get("diagnose", {}), s.get("ident", {})
+    if d:
+        sg, m, ef, nf, sh = d["single"], d["multi"], d["effect_free"], d["near_floor"], d["shrink"]
+        b.row("9 verify: single effects top-1", frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
+              None if not sg["n"] else sg["top1"] >= 0.95 * sg["n"])
+        for cat in ("pair", "triple"):
+            mc = m[cat]
+            ok = None if mc["recall"] is None or mc["precision"] is None else (
+                mc["recall"] >= 0.85 and mc["precision"] >= 0.90)
+            b.row(f"9 verify: {cat}s recall / precision", f"{_f2(mc['recall'])} / {_f2(mc['precision'])}",
+                  "-", None, ">= 0.85 / 0.90", ok)
+        b.row("9 verify: effect-free logs with no effect named", frac(ef["n"] - ef["false_alarms"], ef["n"]),
+              "-", None, ">= 95 %", None if not ef["n"] else ef["false_alarms"] <= 0.05 * ef["n"])
+        b.row("9 verify: near-floor false attributions", frac(nf["false_attributions"], nf["n"]), "-", None, "-", None)
+        w = d["worse_than_nominal"]
+        b.row("9 verify: held-out shrink median / worst; worse, unflagged",
+              f"{_f2(sh['median'])} / {_f2(sh['worst'])}; {w['n'] - w['flagged']}", "-", None, ">= 0.80; 0",
+              None if sh["median"] is None else sh["median"] >= 0.80 and w["n"] == w["flagged"])
+        b.row("9 verify: seconds per diagnosis, median / max",
+              f"{d['seconds']['median']:.1f} / {d['seconds']['max']:.1f}", "-", None, "-", None)
+    if i:
+        ot = i.get("offset_test", {})
+        b.row("9 verify: identify within 1 dB / 5 deg (0.1-15 Hz)", frac(i["within_1db_5deg"], i["n"]), "-", None,
+              "all", i["within_1db_5deg"] == i["n"])
+        if ot.get("n"):
+            b.row("9 verify: offset test false rejections at p = 0.05", frac(ot["rejected_at_0.05"], ot["n"]),
+                  "-", None, "<= 5 %", ot["rejected_at_0.05"] <= 0.05 * ot["n"])
+
+
+def _f2(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
 def _fig7(b: _Bench) -> None:
     from hasel_sysid.bench_rt import busy_loop_process
 
@@ -529,7 +594,7 @@ def _fig8(b: _Bench) -> None:
 
 
 _RUNNERS: dict[int, Callable[[_Bench], None]] = {1: _fig1, 2: _fig2, 3: _fig3, 4: _fig4, 5: _fig5, 6: _fig6,
-                                                  7: _fig7, 8: _fig8}
+                                                  7: _fig7, 8: _fig8, 9: _fig9}
 
 
 def _parse_only(text: str) -> list[int]:
