@@ -505,9 +505,6 @@ def _fig9(b: _Bench) -> None:
                         "--hasel", str(root / ".venv" / "bin" / "hasel")], check=True, stdout=subprocess.DEVNULL)
         s = json.loads(Path(tmp, "score.json").read_text())
         b.reports.append("verification corpus (untuned):\n" + Path(tmp, "score.md").read_text())
-    for key in ("diagnose", "ident"):
-        for c in s.get(key, {}).get("cases", []):
-            c.pop("stderr", None)
     b.results["9_verify"] = s
 
     def frac(a, n):
@@ -543,6 +540,7 @@ def _fig9(b: _Bench) -> None:
 
 
 def _f2(x: float | None) -> str:
+    """A share or ratio with two decimals, "-" when there is none."""
     return "-" if x is None else f"{x:.2f}"
 
 
