@@ -21,5 +21,10 @@ setup(
         "console_scripts": [
             "recorder = hasel_sysid.recorder_node:main",
         ],
+        # subcommands of `hasel` (the core finds them here; see hasel.cli)
+        "hasel.commands": [
+            f"{name} = hasel_sysid.commands:{name.upper()}"
+            for name in ("steps", "compare", "calibrate", "chirp", "record", "replay", "demo")
+        ],
     },
 )

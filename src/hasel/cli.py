@@ -1,9 +1,14 @@
 """``hasel``: the one command in front of every job.
 
-Each subcommand is a row of :data:`COMMANDS`: its options are declared here (so
-``hasel --help`` is instant and needs no ROS), its work is a plain function
-``run(args) -> int`` imported only when that subcommand runs. Commands that drive the
-node graph live in the ament package ``hasel_sysid``; offline ones in this core.
+Each subcommand is a :class:`Command`: its name, help and options, and its work, a
+plain function ``run(args) -> int`` imported only when that subcommand runs. The
+offline ones are the rows of :data:`COMMANDS`, in this ROS-free core. Other installed
+packages add theirs through the ``hasel.commands`` entry-point group
+(:data:`ENTRY_POINT_GROUP`, one entry point per command naming its ``Command``): the
+node-graph commands in the ament package ``hasel_sysid`` (``setup.py``), the benchmarks
+in ``bench/`` (``pyproject.toml``). The core names none of them. ``hasel --help``
+imports no command module (only the small modules that declare the commands), so it
+is instant and works without ROS.
 
 Exit codes: 0 success; 2 bad input (one line on stderr, no traceback); 1 other failure
 (one line too; ``hasel --debug COMMAND`` shows the traceback); 128 + N when stopped by
@@ -14,7 +19,9 @@ they get ``--overwrite`` and are checked before any work.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
+import os
 import sys
 import threading
 import traceback
@@ -26,7 +33,13 @@ from hasel.errors import BadInputError, HaselError
 from hasel.outputs import Output, add_overwrite_option, check_outputs
 from hasel.validate import seed, text_file
 
-__all__ = ["main", "COMMANDS", "build_parser"]
+__all__ = ["main", "Command", "COMMANDS", "ENTRY_POINT_GROUP", "commands", "build_parser"]
+
+#: Entry-point group in which installed packages declare more subcommands (each a :class:`Command`).
+ENTRY_POINT_GROUP = "hasel.commands"
+#: Top-level modules of the built ROS workspace: a command missing one needs `make setup`.
+_WORKSPACE_MODULES = frozenset({"rclpy", "hasel_ros", "hasel_msgs", "hasel_driver", "hasel_control", "sim_plant",
+                                "hasel_sysid", "hasel_bench"})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -40,60 +53,19 @@ class _Parser(argparse.ArgumentParser):
 
 @dataclass(frozen=True)
 class Command:
-    """A subcommand: name, one-line help, its options, where its work lives, whether it needs ROS."""
+    """A subcommand: name, one-line help, its options, where its work lives, whether it needs ROS.
+
+    ``add_arguments`` and ``target`` are functions or ``"module:function"`` strings of
+    the declaring package, imported only when that command is parsed or run.
+    """
 
     name: str
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None] | str  # or "module:function"
-    target: str  # "module:function" taking the parsed args, returning the exit code
+    target: Callable[[argparse.Namespace], int] | str  # takes the parsed args, returns the exit code
     needs_ros: bool
     outputs: tuple[Output, ...] = ()  # output options: --overwrite, checked before the run
     text_inputs: tuple[str, ...] = ()  # options naming a text file (YAML, JSON) read by the command
-
-
-def _no_args(p: argparse.ArgumentParser) -> None:
-    del p
-
-
-def _demo_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", default="out/demo", help="directory for the demo's files (default out/demo)")
-    p.add_argument("--quick", action="store_true", help="shorter runs (for CI smoke tests)")
-
-
-def _steps_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--sequence", default="2,4,6,4,2", help="stroke references, mm, comma-separated (default 2,4,6,4,2)")
-    p.add_argument("--hold", type=float, default=1.0, help="seconds per reference (default 1)")
-    p.add_argument("--feedback", choices=["laser", "strain"], default="laser", help="feedback sensor (default laser)")
-    p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
-    p.add_argument("--calibration", default=None, help="strain-sensor calibration YAML (from hasel calibrate)")
-    p.add_argument("--seed", type=seed, default=0, help="noise seed, 0 .. 2^31-1 (default 0)")
-    p.add_argument("--record", metavar="FILE.mcap", default=None, help="record every topic to this MCAP file")
-    p.add_argument("--json", metavar="FILE", default=None, help="write the step metrics as JSON")
-    p.add_argument("--plot", metavar="FILE.png", default=None, help="write a plot of the run")
-
-
-def _calibrate_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--points", default="2,3,4,5,6,7", help="strokes to hold, mm (default 2,3,4,5,6,7)")
-    p.add_argument("--hold", type=float, default=1.0, help="seconds per point (default 1)")
-    p.add_argument("--degree", type=int, choices=[1, 2, 3], default=1, help="polynomial degree (default 1: a line)")
-    p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
-    p.add_argument("--seed", type=seed, default=0, help="noise seed, 0 .. 2^31-1 (default 0)")
-    p.add_argument("--out", default="calibration.yaml", help="calibration YAML to write (default calibration.yaml)")
-
-
-def _record_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--output", required=True, metavar="FILE.mcap", help="MCAP file to write")
-    p.add_argument("--topics", default="", help="comma-separated topics (default: all, discovered as they appear)")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
-
-
-def _replay_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", metavar="FILE", help="MCAP file to replay")
-    p.add_argument("--rate", type=float, default=1.0, help="speed factor of the recorded timing (0: as fast as possible)")
-    p.add_argument("--topics", default="", help="comma-separated topics to replay (default: all)")
-    p.add_argument("--remap", action="append", metavar="FROM:=TO", help="publish a topic under another name")
-    p.add_argument("--clock", action="store_true", help="also publish /clock from the log times")
-    p.add_argument("--wait", type=float, default=1.0, help="seconds for discovery before the first message")
 
 
 def _env_args(p: argparse.ArgumentParser) -> None:
@@ -116,26 +88,10 @@ def run_env(args: argparse.Namespace) -> int:
     return 1
 
 
+#: The core's own subcommands (offline; ``env`` only sets up the workspace's environment).
 COMMANDS: list[Command] = [
     Command("env", "run a command in the workspace's ROS environment: hasel env -- CMD",
             _env_args, "hasel.cli:run_env", True),
-    Command("steps", "closed-loop step test through the node graph on the simulated plant",
-            _steps_args, "hasel_sysid.steps:run", True,
-            (Output("record"), Output("json"), Output("plot")), ("calibration",)),
-    Command("compare", "a measured closed-loop log against simulated plants: steps and NRMSE per plant",
-            "hasel_sysid.compare:add_arguments", "hasel_sysid.compare:run", True,
-            (Output("json"), Output("plot"))),
-    Command("calibrate", "strain-sensor calibration against the laser (1 mm steps, 2-7 mm)",
-            _calibrate_args, "hasel_sysid.calibrate:run", True, (Output("out"),)),
-    Command("chirp", "the paper's identification experiment (chirps on DC offsets), recorded to MCAP",
-            "hasel_sysid.chirp:add_arguments", "hasel_sysid.chirp:run", True, (Output("out"),)),
-    Command("bench", "the benchmarks that `make bench` runs: one table of ratios, and JSON",
-            "hasel_sysid.bench:add_arguments", "hasel_sysid.bench:run", True),
-    Command("record", "record topics of the running graph to an MCAP file (rosbag2 layout)",
-            _record_args, "hasel_sysid.replay:run_record", True, (Output("output"),)),
-    Command("replay", "publish a recorded MCAP file back into the graph", _replay_args,
-            "hasel_sysid.replay:run_replay", True),
-    Command("demo", "the end-to-end demo that `make demo` runs", _demo_args, "hasel_sysid.demo:run", True),
     Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
             "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False,
             (Output("json"), Output("plot"), Output("report", "report.md"))),
@@ -149,25 +105,85 @@ COMMANDS: list[Command] = [
 ]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``hasel`` with every subcommand."""
+def _workspace_paths() -> list[str]:
+    """Python paths of the built ROS workspace's packages that are not on ``sys.path`` yet (no ROS import)."""
+    from hasel.rosenv import ros_environment
+
+    paths = ros_environment({}).get("PYTHONPATH", "").split(os.pathsep)
+    return [p for p in paths if p and p not in sys.path]
+
+
+def _unavailable(name: str, err: BaseException) -> Command:
+    """A stand-in for a declared command whose declaring module cannot be imported: running it says why."""
+    def run(args: argparse.Namespace) -> int:
+        raise err
+
+    return Command(name, f"[unavailable: {err}]", _rest_args, run, True)
+
+
+def _rest_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+
+@functools.cache
+def commands() -> tuple[Command, ...]:
+    """Every subcommand: :data:`COMMANDS`, then those declared in the :data:`ENTRY_POINT_GROUP` entry points.
+
+    The built ROS workspace's Python paths are appended to ``sys.path`` first (its
+    packages are not in the venv), so its commands are listed without sourcing anything;
+    declaring a command imports only the small module that holds its :class:`Command`.
+    """
+    from importlib.metadata import entry_points
+
+    sys.path.extend(_workspace_paths())
+    found = list(COMMANDS)
+    seen = {c.name for c in found}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in seen:
+            continue
+        try:
+            cmd = ep.load()
+        except Exception as err:  # noqa: BLE001 - a broken or half-installed package must not break `hasel`
+            cmd = _unavailable(ep.name, err)
+        if not isinstance(cmd, Command) or cmd.name != ep.name:
+            cmd = _unavailable(ep.name, TypeError(f"entry point {ep.value} is not the Command {ep.name!r}"))
+        seen.add(cmd.name)
+        found.append(cmd)
+    return tuple(found)
+
+
+def _resolve(ref: Callable | str) -> Callable:
+    """A function given as itself or as ``"module:function"`` (imported now)."""
+    if callable(ref):
+        return ref
+    module, func = ref.split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of ``hasel`` with every subcommand.
+
+    With ``only`` (a command name, or ``""`` for none) only that command's options are
+    declared, so that parsing one command imports no other command's module.
+    """
     parser = _Parser(prog="hasel", description="HASEL soft-actuator toolkit: closed loop, "
                      "MCAP logs, identification and sim-to-real gap diagnosis (mm, kV, s).")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for cmd in COMMANDS:
+    for cmd in commands():
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
-        add = cmd.add_arguments
-        if isinstance(add, str):
-            module, func = add.split(":")
-            try:
-                add = getattr(importlib.import_module(module), func)
-            except ImportError as err:  # a part of the toolkit that is not installed
-                p.description = f"{cmd.help} [unavailable: {err}]"
-                continue
+        p.set_defaults(_command=cmd)
+        if only is not None and cmd.name != only:
+            continue
+        try:
+            add = _resolve(cmd.add_arguments)
+        except ImportError as err:  # a part of the toolkit that is not installed: running it says so
+            p.description = f"{cmd.help} [unavailable: {err}]"
+            _rest_args(p)
+            p.set_defaults(_unavailable=err)
+            continue
         add(p)
         if cmd.outputs:
             add_overwrite_option(p)
-        p.set_defaults(_command=cmd)
     return parser
 
 
@@ -223,10 +239,11 @@ def _run(cmd: Command, args: argparse.Namespace, debug: bool) -> int:
         for opt in cmd.text_inputs:
             if getattr(args, opt, None):
                 text_file("--" + opt.replace("_", "-"), getattr(args, opt))
+        unavailable = getattr(args, "_unavailable", None)
+        if unavailable is not None:
+            raise unavailable
         check_outputs(args, cmd.outputs)
-        module, func = cmd.target.split(":")
-        run = getattr(importlib.import_module(module), func)
-        return int(run(args) or 0)
+        return int(_resolve(cmd.target)(args) or 0)
     except interrupt.Interrupted as stop:
         sys.stderr.write(f"{name}: {stop}; files closed\n")
         return stop.exit_code
@@ -249,8 +266,7 @@ def _run(cmd: Command, args: argparse.Namespace, debug: bool) -> int:
         sys.stderr.write(f"{name}: failed: {err}\n")
         return 1
     except ModuleNotFoundError as err:
-        if cmd.needs_ros and err.name and err.name.split(".")[0] in {
-                "rclpy", "hasel_sysid", "hasel_msgs", "hasel_driver", "hasel_control", "sim_plant"}:
+        if cmd.needs_ros and err.name and err.name.split(".")[0] in _WORKSPACE_MODULES:
             sys.stderr.write(f"{name}: needs the built ROS workspace ({err.name} not found); run `make setup`\n")
             return 1
         return _failed(name, err, debug)
@@ -270,12 +286,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` (default ``sys.argv[1:]``), run the subcommand, return its exit code."""
     argv, debug = _split_debug(list(sys.argv[1:] if argv is None else argv))
     first = next((a for a in argv if not a.startswith("-")), None)
-    if any(c.name == first and c.needs_ros for c in COMMANDS):
+    if any(c.name == first and c.needs_ros for c in commands()):
         # its options may live in a ROS package: get the workspace on the path first
         from hasel.rosenv import ensure_ros_environment
 
         ensure_ros_environment()
-    parser = build_parser()
+    parser = build_parser(first or "")
     args = parser.parse_args(argv)
     cmd: Command | None = getattr(args, "_command", None)
     if cmd is None:

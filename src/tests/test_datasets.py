@@ -8,12 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hasel import datasets as D
+import realdata as D
 from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.errors import DataFileError
 
 HAVE = (D.datasets_dir() / "README.md").is_file()
-needs_data = pytest.mark.skipif(not HAVE, reason="shared/datasets not present")
+needs_data = pytest.mark.skipif(not HAVE, reason=D.MISSING)
 
 
 def test_missing_directory_is_a_data_file_error(tmp_path):

@@ -10,7 +10,7 @@ from scipy import signal
 
 from hasel import paper
 from hasel.diagnose import DiagnoseOptions, diagnose
-from hasel.diagnose.blind import excitation
+from hasel_bench.blind import excitation
 from hasel.diagnose.linfit import fit_linear
 from hasel.diagnose.prep import LinearSim, estimate_noise, nrmse, prepare
 from hasel.diagnose.where import model_error_model

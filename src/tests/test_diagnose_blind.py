@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hasel.diagnose.blind import format_report, make_case, run_blind, score
+from hasel_bench.blind import format_report, make_case, run_blind, score
 
 
 def test_case_files_hold_no_label(tmp_path):

@@ -1,5 +1,5 @@
 """Diagnosis that does not invent effects: sampling conventions, coloured noise, generalisation, ambiguity,
-unusable models. Effect-free logs come from the independent simulator's calibration logs (hasel.othersim)."""
+unusable models. Effect-free logs come from the independent simulator's calibration logs (hasel_bench.othersim)."""
 from __future__ import annotations
 
 import json
@@ -13,7 +13,7 @@ from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.diagnose.core import DiagnosisFailed, _alike, _block_labels, _generalise, block_test, timing_stage
 from hasel.diagnose.prep import LinearSim, prepare
-from hasel.othersim import make_free_case
+from hasel_bench.othersim import make_free_case
 
 
 def _diagnose_file(path):

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from hasel.io.bench import load_speed, writer_overhead
+from hasel_bench.iospeed import load_speed, writer_overhead
 
 
 def test_writer_overhead_small():

@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from hasel.datasets import datasets_dir
+from realdata import datasets_dir
 
 import numpy as np
 import pytest

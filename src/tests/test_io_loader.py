@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hasel.datasets import datasets_dir
+from realdata import datasets_dir
 
 import numpy as np
 import pytest

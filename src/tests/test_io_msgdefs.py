@@ -5,7 +5,7 @@ import json
 import sys
 from pathlib import Path
 
-from hasel.datasets import datasets_dir
+from realdata import datasets_dir
 
 REPO = Path(__file__).resolve().parents[2]  # the repository root
 

@@ -9,7 +9,7 @@ import textwrap
 import time
 from pathlib import Path
 
-from hasel.datasets import datasets_dir
+from realdata import datasets_dir
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Tests of the independent other simulator (hasel.othersim) against closed forms and scipy."""
+"""Tests of the independent other simulator (hasel_bench.othersim) against closed forms and scipy."""
 from __future__ import annotations
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from hasel import othersim as o
+from hasel_bench import othersim as o
 from hasel import paper
 
 
@@ -200,7 +200,7 @@ def test_score_reveals_labels_and_counts():
 def test_effect_free_logs_follow_their_sampling_convention(tmp_path):
     from hasel import paper
     from hasel.diagnose.prep import LinearSim
-    from hasel.othersim import make_free_case
+    from hasel_bench.othersim import make_free_case
 
     num, den = paper.plant_tf()
     zoh = make_free_case(0, 5, str(tmp_path), design="prbs", rate_hz=500.0, convention="zoh", offset_samples=0.0,

@@ -6,7 +6,7 @@
 - :mod:`hasel.diagnose.where`: the residual localised in frequency, time, level,
   direction and amplitude.
 - :mod:`hasel.diagnose.report`: markdown report with PNGs; :mod:`hasel.diagnose.cli`:
-  ``hasel diagnose``; :mod:`hasel.diagnose.blind`: the blind withheld check.
+  ``hasel diagnose``; :mod:`hasel_bench.blind`: the blind withheld check.
 """
 from hasel.diagnose.core import DiagnoseOptions, Verdict, diagnose
 

@@ -17,7 +17,7 @@ runaway allocation shows up as MemoryError, a failure; the peak resident size is
 reported). Failing inputs are kept (``failures_dir``; ``hasel bench`` puts them beside
 its JSON) for the I/O code's authors.
 
-Cases run in a worker process (``python -m hasel_sysid.bench_fuzz``, no ROS) that
+Cases run in a worker process (``python -m hasel_bench.fuzz``, no ROS) that
 prints ``S <i>`` before and ``R <i> <status> <detail>`` after each case; the parent
 enforces the timeouts and restarts the worker after a hang.
 """
@@ -263,7 +263,7 @@ def run_fuzz(budget_s: float, case_timeout_s: float = 5.0, seed: int = 0, mem_li
         while time.monotonic() < deadline - 0.5:
             work = tmp / f"w{restarts}"
             work.mkdir()
-            proc = subprocess.Popen([sys.executable, "-m", "hasel_sysid.bench_fuzz", str(seed_dir), str(work),
+            proc = subprocess.Popen([sys.executable, "-m", "hasel_bench.fuzz", str(seed_dir), str(work),
                                      str(next_case), str(seed), repr(deadline), str(mem_limit_mib * 2**20)],
                                     stdout=subprocess.PIPE, text=True, env=env)
             lines: list[str] = []

@@ -11,16 +11,16 @@ Figures (each measured against its baseline in the same run where one exists):
    and the timers on the simulated clock) and the wall time per callback: lockstep
    runs them one after another, so their product sets the speed. And the ceiling
    of any graph of this shape on this machine
-   (:func:`~hasel_sysid.bench_graph.ring_floor`): five nodes that do nothing but
+   (:func:`~hasel_bench.graph.ring_floor`): five nodes that do nothing but
    pass one message around, one more hop for ``/clock``, and one step of the plant
    simulation; ``period / that`` is the most a lockstep graph of five nodes can
    reach, with and without the plant's own cost. And the ceiling of this graph's
    own message pattern: its publishes and deliveries per tick priced at the empty
    ring's measured cost of a publish and of a delivery, plus the plant step
-   (:func:`~hasel_sysid.bench_graph.pattern_ceiling`): the speed of the same graph
+   (:func:`~hasel_bench.graph.pattern_ceiling`): the speed of the same graph
    if every callback did nothing; a target above it cannot be met with this stack.
    And the other process layout: the recorder in a process of its own, on the other
-   core (:func:`~hasel_sysid.bench_graph.graph_speed_split`): its speed, and the
+   core (:func:`~hasel_bench.graph.graph_speed_split`): its speed, and the
    messages it lost (the loop does not wait for a recorder in another process).
 2. The offline core closed loop (:func:`hasel.loop.run_closed_loop`): simulated
    seconds per wall second, against ``scipy.signal.lsim`` of the same loop's plant on
@@ -42,10 +42,10 @@ Figures (each measured against its baseline in the same run where one exists):
    against merely loading the same files; the recorder node's message path against
    a bare ``mcap`` writer writing the same bytes; the MCAP writer alone against the
    bare writer with the same zstd level.
-6. The diagnosis blind check (:func:`hasel.diagnose.blind.run_blind`): top-1
+6. The diagnosis blind check (:func:`hasel_bench.blind.run_blind`): top-1
    accuracy, the right pair, false alarms and misses, median held-out shrink, time
    per case ("not available" when that module is absent). Then the same scoring on
-   logs of an independent simulator (:func:`hasel.othersim.run_othersim`) whose
+   logs of an independent simulator (:func:`hasel_bench.othersim.run_othersim`) whose
    effects have other forms, rates and excitations than the generator the
    diagnosis was developed with.
 7. The 200 Hz loop while a busy-loop process loads one core, against figure 3's
@@ -189,7 +189,7 @@ class _Bench:
 # -- figures -------------------------------------------------------------------------------
 
 def _fig1(b: _Bench) -> None:
-    from hasel_sysid.bench_graph import graph_speed
+    from hasel_bench.graph import graph_speed
 
     dur, base_dur = (2.0, 0.5) if b.quick else (20.0, 2.0)
     with tempfile.TemporaryDirectory(prefix="hasel-bench-") as tmp:
@@ -204,7 +204,7 @@ def _fig1(b: _Bench) -> None:
     need = 1e6 * _period_s() / 40.0 / ev["us_per_callback"]
     b.row("1 executor callbacks per simulated tick", f"{ev['callbacks_per_tick']:.0f} x {ev['us_per_callback']:.1f} us",
           "-", None, f"40x needs <= {need:.0f} at this cost", None)
-    from hasel_sysid.bench_graph import graph_speed_split
+    from hasel_bench.graph import graph_speed_split
 
     b.say(f"1: same graph, recorder in a process of its own, {base_dur * 5:g} s simulated")
     with tempfile.TemporaryDirectory(prefix="hasel-bench-") as tmp:
@@ -220,7 +220,7 @@ def _fig1(b: _Bench) -> None:
     bare = 1e6 * _period_s() / (fl["round_us"] + fl["hop_us"])
     b.row("1 ceiling: empty 5-node ring + /clock hop, + plant step", f"{fl['speed_ceiling']:.1f}x",
           f"{bare:.1f}x (no plant step)", ev["speed"] / fl["speed_ceiling"], ">= 40x", None)
-    from hasel_sysid.bench_graph import pattern_ceiling
+    from hasel_bench.graph import pattern_ceiling
 
     pat = pattern_ceiling(fl, ev["publishes_per_tick"], ev["deliveries_per_tick"], ev["timers_per_tick"])
     ev["pattern_ceiling"] = pat
@@ -234,7 +234,7 @@ def _ring_floor(b: _Bench) -> dict[str, Any]:
     """The empty-ring floor of a tick (measured once per run, shared by figures 1 and 4)."""
     fl = b.results.get("floor")
     if fl is None:
-        from hasel_sysid.bench_graph import ring_floor
+        from hasel_bench.graph import ring_floor
 
         b.say("1/4: floor of a tick: an empty 5-node ring and one plant step")
         fl = b.results["floor"] = ring_floor(5, 1000 if b.quick else 5000, b.domain)
@@ -243,7 +243,7 @@ def _ring_floor(b: _Bench) -> dict[str, Any]:
 
 
 def _fig2(b: _Bench) -> None:
-    from hasel_sysid.bench_offline import core_vs_lsim
+    from hasel_bench.offline import core_vs_lsim
 
     dur = 2.0 if b.quick else 20.0
     b.say(f"2: offline core loop and lsim, {dur:g} s simulated")
@@ -255,7 +255,7 @@ def _fig2(b: _Bench) -> None:
 
 
 def _rt_single(b: _Bench, duration_s: float, roles: str = "all") -> dict[str, Any]:
-    from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_layout
+    from hasel_bench.realtime import WorkerSpec, latency_summary, run_layout
 
     warm = 1.0 if b.quick else 2.0
     kw = {"duration_s": duration_s, "warmup_s": warm, "domain_id": b.domain, "rt_priority": b.rt_priority}
@@ -306,7 +306,7 @@ def _fig3(b: _Bench) -> None:
 
 
 def _scale_point(b: _Bench, n: int, workers: int, duration_s: float) -> dict[str, Any]:
-    from hasel_sysid.bench_rt import WorkerSpec, latency_summary, run_layout
+    from hasel_bench.realtime import WorkerSpec, latency_summary, run_layout
 
     w = max(1, min(workers, n))
     specs = [WorkerSpec(tuple(range(i, n, w)), duration_s=duration_s, warmup_s=1.0, slot=i, slots=w,
@@ -378,10 +378,10 @@ def _fig4(b: _Bench) -> None:
 
 
 def _fig5(b: _Bench) -> None:
-    from hasel.io.bench import writer_overhead
+    from hasel_bench.iospeed import writer_overhead
 
-    from hasel_sysid.bench_graph import recorder_vs_bare
-    from hasel_sysid.bench_offline import CAMPAIGN_GAINS, ident_vs_load, write_campaign
+    from hasel_bench.graph import recorder_vs_bare
+    from hasel_bench.offline import CAMPAIGN_GAINS, ident_vs_load, write_campaign
 
     b.cache.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -418,7 +418,7 @@ def _fig5(b: _Bench) -> None:
 
 def _fig6(b: _Bench) -> None:
     try:
-        from hasel.diagnose.blind import run_blind
+        from hasel_bench.blind import run_blind
     except ImportError as err:
         b.results["6_blind"] = {"available": False, "reason": str(err)}
         b.row("6 diagnosis blind check", "not available", "-", None, "-", None)
@@ -426,7 +426,7 @@ def _fig6(b: _Bench) -> None:
     n, quick = (4, True) if b.quick else (30, False)
     b.say(f"6: diagnosis blind check, {n} cases, 2 workers")
     s = run_blind(n, seed=0, workers=2, quick=quick, progress=lambda m: b.say("6: " + m.strip()))
-    from hasel.diagnose.blind import format_report
+    from hasel_bench.blind import format_report
 
     b.reports.append(format_report(s))  # the labels revealed: confusion matrix, wrong cases
     cases = s.pop("cases", [])
@@ -456,18 +456,18 @@ def _fig6(b: _Bench) -> None:
 
 
 def _fig6_foreign(b: _Bench, pct: Callable[[float | None], str]) -> None:
-    """The same blind scoring on logs of an independent simulator (:mod:`hasel.othersim`).
+    """The same blind scoring on logs of an independent simulator (:mod:`hasel_bench.othersim`).
 
     Its effects have other forms (slew limits, Prandtl-Ishlinskii and Duhem hysteresis,
     Pade delays, power-law maps, springy loads...), other rates (500 Hz, 1 kHz) and
     excitations: the diagnosis cannot have been tuned to its parameters.
     """
-    from hasel.othersim import run_othersim
+    from hasel_bench.othersim import run_othersim
 
     n = 3 if b.quick else 10
     b.say(f"6: the diagnosis on an independent simulator's logs, {n} cases")
     s = run_othersim(n, seed=2, progress=lambda m: b.say("6: " + m.strip()), short=b.quick)
-    from hasel.othersim import format_report
+    from hasel_bench.othersim import format_report
 
     b.reports.append(format_report(s))
     cases = s.pop("cases", [])
@@ -489,12 +489,11 @@ def _fig9(b: _Bench) -> None:
     """Identification and diagnosis on the verification corpus (``bench/verify``), on which no threshold
     was tuned: generated from its seed, then scored black-box by its own scorer (exit codes and JSON only).
     """
-    from hasel.rosenv import workspace_root
-
-    root = workspace_root()
-    here = root / "bench" / "verify" if root is not None else None
-    if here is None or not (here / "score.py").is_file():
-        raise FileNotFoundError("bench/verify is not in this workspace (it lives in the repository, not the install)")
+    here = Path(__file__).resolve().parents[1] / "verify"  # bench/verify, beside this package
+    if not (here / "score.py").is_file():
+        raise FileNotFoundError(f"the verification corpus's scripts are not at {here} (an editable install of bench/ "
+                                "keeps them beside this package)")
+    hasel = Path(sys.executable).with_name("hasel")  # the venv's command, as a user runs it
     quick = ["--quick"] if b.quick else []
     with tempfile.TemporaryDirectory(prefix="hasel-verify-") as tmp:
         b.say(f"9: generating the verification corpus{' (quick subset)' if b.quick else ''}")
@@ -502,7 +501,7 @@ def _fig9(b: _Bench) -> None:
                        stdout=subprocess.DEVNULL)
         b.say("9: scoring it black-box (hasel identify / diagnose in subprocesses, 2 jobs)")
         subprocess.run([sys.executable, str(here / "score.py"), "--corpus", tmp, "--jobs", "2", *quick,
-                        "--hasel", str(root / ".venv" / "bin" / "hasel")], check=True, stdout=subprocess.DEVNULL)
+                        "--hasel", str(hasel)], check=True, stdout=subprocess.DEVNULL)
         s = json.loads(Path(tmp, "score.json").read_text())
         b.reports.append("verification corpus (untuned):\n" + Path(tmp, "score.md").read_text())
     b.results["9_verify"] = s
@@ -545,7 +544,7 @@ def _f2(x: float | None) -> str:
 
 
 def _fig7(b: _Bench) -> None:
-    from hasel_sysid.bench_rt import busy_loop_process
+    from hasel_bench.realtime import busy_loop_process
 
     dur = 5.0 if b.quick else 60.0
     unloaded = b.results.get("3_realtime", {}).get("one_process")
@@ -569,7 +568,7 @@ def _fig7(b: _Bench) -> None:
 
 
 def _fig8(b: _Bench) -> None:
-    from hasel_sysid.bench_fuzz import run_fuzz
+    from hasel_bench.fuzz import run_fuzz
 
     budget, timeout = (3.0, 5.0) if b.quick else (20.0, 10.0)
     fail_dir = b.out_dir / "bench_fuzz_failures"
@@ -584,7 +583,7 @@ def _fig8(b: _Bench) -> None:
           "0 (only DataFileError/BadInputError)", r["crashed"] == 0)
     b.row("8 loader fuzzing: peak memory", f"{r['peak_rss_mib']:.0f} MiB (+{r['rss_growth_mib']:.0f})", "-", None,
           f"< {r['mem_limit_mib']} MiB limit", 0 < r["peak_rss_mib"] < r["mem_limit_mib"])
-    from hasel_sysid.bench_fuzz import run_cli_fuzz  # every subcommand and node (issue 17)
+    from hasel_bench.fuzz import run_cli_fuzz  # every subcommand and node (issue 17)
 
     c = b.results["8_cli_fuzz"] = run_cli_fuzz(1.0 if b.quick else 4.0, progress=b.say)
     b.row("8 CLI fuzzing: cases tried", f"{c['cases']} ({c['wall_s']:.0f} s)", "-", None,

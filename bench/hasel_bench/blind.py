@@ -5,7 +5,7 @@ seed), simulates the truth actuator (:class:`hasel.effects.TruthActuator`) on an
 excitation a researcher would use on a HASEL, and writes the log to an ``.npz`` file
 holding only ``t_s``, ``voltage_kv``, ``stroke_mm`` and the nominal model: no label.
 The labels stay in the generating process. Each file is diagnosed in a separate
-process (``multiprocessing`` with the *spawn* start method) that receives only the
+process (:mod:`hasel_bench.harness`: *spawn* start method) that receives only the
 file's path. Then the labels are revealed and scored:
 
 - **top-1** (single-effect and no-effect cases): the first named effect is the
@@ -13,7 +13,8 @@ file's path. Then the labels are revealed and scored:
 - **pair** (two-effect cases): the first two named effects are the true pair, in
   any order.
 - **false alarm**: a no-effect case where something is named; **miss**: an effect
-  case where nothing is named.
+  case where nothing is named (a diagnosis that raised names nothing; ``errors``
+  counts them).
 - **shrink** (effect cases): ``(nrmse_nominal - nrmse_augmented) /
   (nrmse_nominal - noise_floor_nrmse)`` on held-out data: the share of the gap
   above the noise floor that the named augmentations remove (1 = down to noise).
@@ -22,17 +23,15 @@ Excitation (10 kHz command, kV): a reverse-charge hold at -1 kV, a slow 0.2 Hz s
 around 4 kV (hysteresis and level), exponential chirps 0.2-25 Hz of 1 kV around
 DC offsets in random order, each repeated, and steps 2-4-6-4-2-0 kV (direction).
 
-Run ``python -m hasel.diagnose.blind --cases 30`` (``--quick`` for the CI size).
+Run ``python -m hasel_bench.blind --cases 30`` (``--quick`` for the CI size).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
-import multiprocessing as mp
 import os
 import sys
-import tempfile
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -42,6 +41,7 @@ import numpy as np
 from hasel import paper
 from hasel.effects import EFFECT_NAMES, TruthActuator, sample_effect
 from hasel.plant import amplifier_filter_tf
+from hasel_bench.harness import case_directory, diagnose_files
 
 __all__ = ["BlindCase", "excitation", "make_case", "run_blind", "score", "main"]
 
@@ -137,18 +137,6 @@ def make_case(index: int, seed: int, directory: str, *, quick: bool = False) -> 
     return BlindCase(index, seed, tuple(names), {e.name: e.params() for e in effects}, noise, path)
 
 
-def _diagnose_file(path: str) -> dict:
-    """Worker (separate process): diagnose an unlabelled case file; returns the verdict's essentials."""
-    from hasel.diagnose.core import diagnose
-
-    d = np.load(path)
-    t0 = time.perf_counter()
-    v = diagnose(d["t_s"], d["voltage_kv"], d["stroke_mm"], model=(d["num"], d["den"]), units=("kV", "mm"))
-    return {"path": path, "names": v.names, "nrmse_nominal": v.heldout["nrmse_nominal"],
-            "nrmse_augmented": v.heldout["nrmse_augmented"], "floor": v.noise_floor_nrmse,
-            "effects": v.effects, "rounds": v.rounds, "seconds": time.perf_counter() - t0}
-
-
 def score(cases: list[BlindCase], results: dict[str, dict]) -> dict:
     """Reveal the labels and score the verdicts (see the module docstring)."""
     rows = []
@@ -163,12 +151,13 @@ def score(cases: list[BlindCase], results: dict[str, dict]) -> dict:
             ok = first == truth[0]
         else:
             ok = sorted(named[:2]) == sorted(truth)
-        gap = r["nrmse_nominal"] - r["floor"]
+        gap = r.get("nrmse_nominal", 0.0) - r.get("floor", 0.0)  # none when the diagnosis raised
         shrink = (r["nrmse_nominal"] - r["nrmse_augmented"]) / gap if truth and gap > 0 else None
         rows.append({"case": c.index, "seed": c.seed, "truth": truth, "named": named, "correct": bool(ok),
-                     "shrink": shrink, "nrmse_nominal": r["nrmse_nominal"], "nrmse_augmented": r["nrmse_augmented"],
-                     "floor": r["floor"], "seconds": r["seconds"], "params": c.params, "noise_mm": c.noise_mm,
-                     "rounds": r.get("rounds", [])})
+                     "shrink": shrink, "nrmse_nominal": r.get("nrmse_nominal"),
+                     "nrmse_augmented": r.get("nrmse_augmented"), "floor": r.get("floor"), "seconds": r["seconds"],
+                     "params": c.params, "noise_mm": c.noise_mm, "rounds": r.get("rounds", []),
+                     "error": r.get("error")})
     single = [x for x in rows if len(x["truth"]) <= 1]
     pairs = [x for x in rows if len(x["truth"]) == 2]
     none = [x for x in rows if not x["truth"]]
@@ -187,6 +176,7 @@ def score(cases: list[BlindCase], results: dict[str, dict]) -> dict:
         "pair_one_right": (sum(bool(set(x["named"][:2]) & set(x["truth"])) for x in pairs) / len(pairs)) if pairs else None,
         "false_alarms": sum(bool(x["named"]) for x in none), "n_none": len(none),
         "misses": sum(not x["named"] for x in eff), "n_effect_cases": len(eff),
+        "errors": sum(bool(x["error"]) for x in rows),
         "median_shrink": float(np.median(shrinks)) if shrinks else None,
         "seconds_per_case": float(np.mean([x["seconds"] for x in rows])) if rows else None,
         "confusion": {k: dict(v) for k, v in confusion.items()},
@@ -250,34 +240,23 @@ def run_blind(n_cases: int = 30, seed: int = 0, workers: int = 1, *, quick: bool
     """
     say = progress or (lambda m: None)
     t0 = time.perf_counter()
-    tmp = None
-    if directory is None:
-        tmp = tempfile.TemporaryDirectory(prefix="hasel-blind-")
-        directory = tmp.name
-    try:
+    with case_directory(directory, "hasel-blind-") as directory:
         cases = []
         for i in range(n_cases):
             cases.append(make_case(i, seed * 100003 + i, directory, quick=quick))
         say(f"generated {n_cases} cases in {time.perf_counter() - t0:.1f} s; diagnosing blind in "
             f"{workers} spawned process(es)")
-        ctx = mp.get_context("spawn")
-        results: dict[str, dict] = {}
-        with ctx.Pool(max(1, int(workers))) as pool:
-            for r in pool.imap_unordered(_diagnose_file, [c.path for c in cases]):
-                results[r["path"]] = r
-                say(f"  {os.path.basename(r['path'])}: {', '.join(r['names']) or 'no effect'} "
-                    f"({r['seconds']:.1f} s)")
-        s = score(cases, results)
+        results = diagnose_files([(c.path, True) for c in cases], workers, lambda r: say(
+            f"  {os.path.basename(r['path'])}: {', '.join(r['names']) or 'no effect'}"
+            f"{' ERROR ' + r['error'] if r.get('error') else ''} ({r['seconds']:.1f} s)"))
+        s = score(cases, {r["path"]: r for r in results})
         s["wall_s"] = time.perf_counter() - t0
         return s
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hasel.diagnose.blind [--cases N] [--seed S] [--workers W] [--quick] [--json FILE]``."""
-    p = argparse.ArgumentParser(prog="python -m hasel.diagnose.blind", description=__doc__.split("\n")[0])
+    """``python -m hasel_bench.blind [--cases N] [--seed S] [--workers W] [--quick] [--json FILE]``."""
+    p = argparse.ArgumentParser(prog="python -m hasel_bench.blind", description=__doc__.split("\n")[0])
     p.add_argument("--cases", type=int, default=30, help="number of blind cases (default 30)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     p.add_argument("--workers", type=int, default=1, help="diagnosing processes (default 1)")

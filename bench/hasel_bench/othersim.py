@@ -1,6 +1,6 @@
 """An independent "other simulator" of a HASEL-like actuator, and a blind check of the diagnosis on it.
 
-The project's own blind check (:mod:`hasel.diagnose.blind`) draws its cases from the
+The project's own blind check (:mod:`hasel_bench.blind`) draws its cases from the
 project's own effect library (:mod:`hasel.effects`), whose functional forms are the
 same ones the diagnosis fits; that can flatter the diagnosis. This module is written
 from scratch (numpy/scipy only, plus :mod:`hasel.paper` for the nominal ``P(s)``) and
@@ -45,18 +45,17 @@ effect the output is P(s)'s response to the log's command to rounding.
 :func:`run_othersim` draws cases (none / one effect / a pair, random kinds and
 parameters, 500 Hz or 1 kHz logs, researcher-style excitations), writes each log to a
 file holding only ``t_s``, ``voltage_kv``, ``stroke_mm`` (and the nominal model), has a
-separate spawned process diagnose the file, then reveals the labels and scores.
-Run ``python -m hasel.othersim --cases 28 --json FILE``.
+separate spawned process diagnose the file (:mod:`hasel_bench.harness`), then reveals
+the labels and scores.
+Run ``python -m hasel_bench.othersim --cases 28 --json FILE``.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
-import multiprocessing as mp
 import os
 import sys
-import tempfile
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -66,6 +65,7 @@ import numpy as np
 from scipy import linalg, signal
 
 from hasel import paper
+from hasel_bench.harness import case_directory, diagnose_files
 
 __all__ = [
     "EFFECT_KINDS", "ForeignEffect", "sample_foreign", "play_operator", "prandtl_ishlinskii", "duhem",
@@ -758,32 +758,6 @@ def _draw_labels(n_cases: int, rng: np.random.Generator) -> list[tuple[tuple[str
     return [out[i] for i in perm]
 
 
-def _diagnose_file(job: tuple[str, bool]) -> dict:
-    """Worker (spawned process): diagnose an unlabelled file, with or without the nominal model."""
-    from hasel.diagnose.core import diagnose
-
-    path, with_model = job
-    d = np.load(path)
-    t0 = time.perf_counter()
-    try:
-        v = diagnose(d["t_s"], d["voltage_kv"], d["stroke_mm"],
-                     model={"num": d["num"].tolist(), "den": d["den"].tolist()} if with_model else None,
-                     units=("kV", "mm"))
-    except Exception as err:  # noqa: BLE001 - a crash is a result to report
-        return {"path": path, "with_model": with_model, "error": f"{type(err).__name__}: {err}",
-                "names": [], "seconds": time.perf_counter() - t0}
-    return {"path": path, "with_model": with_model, "names": v.names,
-            "nrmse_nominal": v.heldout["nrmse_nominal"], "nrmse_augmented": v.heldout["nrmse_augmented"],
-            "floor": v.noise_floor_nrmse, "working_rate_hz": v.working_rate_hz,
-            "effects": [{k: e[k] for k in ("name", "params", "evidence", "nrmse_after", "gap_removed")}
-                        for e in v.effects],
-            "rounds": [{k: r.get(k) for k in ("round", "best", "gain", "z", "accepted")}
-                       | {"top": [(c.get("name"), c.get("nrmse_heldout", c.get("nrmse_validation")))
-                                 for c in r.get("candidates", [])[:4]]}
-                       for r in v.rounds],
-            "model_source": v.model.get("source"), "seconds": time.perf_counter() - t0}
-
-
 def score(cases: list[ForeignCase], results: list[dict]) -> dict:
     """Reveal the labels and score the verdicts.
 
@@ -920,11 +894,7 @@ def run_othersim(n_cases: int, seed: int, progress: Callable[[str], None] | None
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     labels = _draw_labels(int(n_cases), rng)
-    tmp = None
-    if directory is None:
-        tmp = tempfile.TemporaryDirectory(prefix="hasel-othersim-")
-        directory = tmp.name
-    try:
+    with case_directory(directory, "hasel-othersim-") as directory:
         cases = []
         for i, lab in enumerate(labels):
             cs = seed * 100003 + i
@@ -933,27 +903,20 @@ def run_othersim(n_cases: int, seed: int, progress: Callable[[str], None] | None
             cases.append(make_case(i, cs, effs, directory, short=short))
         say(f"generated {len(cases)} cases in {time.perf_counter() - t0:.1f} s")
         jobs = [(c.path, True) for c in cases] + [(c.path, False) for c in cases[:max(0, no_model_cases)]]
-        results: list[dict] = []
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(1) as pool:
-            for r in pool.imap(_diagnose_file, jobs):
-                results.append(r)
-                say(f"  {os.path.basename(r['path'])} ({'model' if r['with_model'] else 'no model'}): "
-                    f"{', '.join(r['names']) or 'no effect'}{' ERROR ' + r['error'] if r.get('error') else ''} "
-                    f"({r['seconds']:.1f} s)")
+        results = diagnose_files(jobs, 1, lambda r: say(
+            f"  {os.path.basename(r['path'])} ({'model' if r['with_model'] else 'no model'}): "
+            f"{', '.join(r['names']) or 'no effect'}{' ERROR ' + r['error'] if r.get('error') else ''} "
+            f"({r['seconds']:.1f} s)"))
         s = score(cases, [r for r in results if r["with_model"]])
         nm = [r for r in results if not r["with_model"]]
         s["no_model"] = score(cases[:len(nm)], nm) if nm else None
         s["wall_s"] = time.perf_counter() - t0
         return s
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m hasel.othersim [--cases N] [--seed S] [--no-model K] [--json FILE]``."""
-    p = argparse.ArgumentParser(prog="python -m hasel.othersim", description=__doc__.split("\n")[0])
+    """``python -m hasel_bench.othersim [--cases N] [--seed S] [--no-model K] [--json FILE]``."""
+    p = argparse.ArgumentParser(prog="python -m hasel_bench.othersim", description=__doc__.split("\n")[0])
     p.add_argument("--cases", type=int, default=28, help="number of cases (default 28)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     p.add_argument("--no-model", type=int, default=0, help="cases also diagnosed without a model")

@@ -351,7 +351,7 @@ def graph_speed_split(duration_s: float, domain_id: int, directory: str | os.Pat
     path = Path(directory) / "graph_split.mcap"
     stop = Path(str(path) + ".stop")
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
-    child = subprocess.Popen([sys.executable, "-m", "hasel_sysid.bench_graph", "recorder", str(path),
+    child = subprocess.Popen([sys.executable, "-m", "hasel_bench.graph", "recorder", str(path),
                               str(domain_id)], stdout=subprocess.PIPE, text=True, env=env)
     try:
         seq = [2.0, 4.0, 6.0, 4.0, 2.0]
@@ -440,4 +440,4 @@ def _recorder_main(argv: list[str]) -> int:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["recorder"]:
         sys.exit(_recorder_main(sys.argv[2:]))
-    sys.exit(f"usage: python -m hasel_sysid.bench_graph recorder PATH DOMAIN (got {sys.argv[1:]})")
+    sys.exit(f"usage: python -m hasel_bench.graph recorder PATH DOMAIN (got {sys.argv[1:]})")

@@ -5,9 +5,10 @@ One *loop* is the node chain of one actuator on the wall clock: ``sim_plant``
 ``strain_driver``, ``lowpass_filter``, ``pid_controller`` (strain-sensor feedback, so
 every tick crosses the whole chain plant -> driver -> filter -> controller -> amplifier
 -> plant), ``hv_amplifier`` and ``reference_generator``, all under their own
-namespace (``/rt0``, ``/rt1``...), no ``/clock``. The plant measures the loop: the
-latency from a tick's sensor stamp to the arrival of the amplifier output carrying
-that stamp, the periods whose output had not arrived by the next tick, and its ticks.
+namespace (``/rt0``, ``/rt1``...), no ``/clock``. The plant is measured from outside
+its stepping (:class:`hasel_bench.probe.MeasuredPlant`): the latency from a tick's
+sensor stamp to the arrival of the amplifier output carrying that stamp, the periods
+whose output had not arrived by the next tick, and its ticks.
 
 Executor: rclpy's ``EventsExecutor`` in every worker process (a message hop costs
 about 14 us there against about 175 us with the ``SingleThreadedExecutor``; at 200 Hz
@@ -25,12 +26,12 @@ real-time scheduler spreads periodic tasks, so the loops do not all wake at once
 Python's garbage collector is frozen after set-up (``gc.freeze``) so a collection
 does not scan the long-lived nodes inside a period.
 
-Missed periods are the plant's own count (no output by the next tick) plus ticks the
-timer skipped because the process woke more than a period late (the plant counts
-them from the gaps between its wake-ups; ``expected - ticks`` would also count the
+Missed periods are the measured plant's count (no output by the next tick) plus ticks
+the timer skipped because the process woke more than a period late (counted from the
+gaps between its wake-ups; ``expected - ticks`` would also count the
 phase of a loop's first tick against the window as a miss).
 
-Workers run as ``python -m hasel_sysid.bench_rt WORKER_JSON`` and print one line
+Workers run as ``python -m hasel_bench.realtime WORKER_JSON`` and print one line
 (``ready``) when their nodes are matched, wait for ``go EPOCH`` on stdin, print the
 result as one JSON line, and tear their nodes down only on ``end`` (sent once every
 worker has measured: one worker's teardown must not load the others' window).
@@ -122,7 +123,7 @@ def _build(ctx, spec: WorkerSpec, total_s: float) -> tuple[list, list]:
     from hasel_control.reference_node import ReferenceNode
     from hasel_driver.driver_node import StrainDriverNode
     from hasel_driver.filter_node import LowPassNode
-    from sim_plant.plant_node import PlantNode
+    from hasel_bench.probe import MeasuredPlant
 
     nodes, plants = [], []
     n_refs = min(900, int(math.ceil(total_s)) + 2)
@@ -130,7 +131,7 @@ def _build(ctx, spec: WorkerSpec, total_s: float) -> tuple[list, list]:
     for k in spec.loops:
         kw = {"context": ctx, "namespace": f"/rt{k}"}
         if spec.roles in ("all", "plant"):
-            p = PlantNode(None, **kw, parameter_overrides=[Parameter("clock_mode", value="wall"),
+            p = MeasuredPlant(None, **kw, parameter_overrides=[Parameter("clock_mode", value="wall"),
                                                            Parameter("seed", value=k)])
             plants.append(p)
             nodes.append(p)
@@ -399,7 +400,7 @@ def run_layout(specs: Sequence[WorkerSpec], in_process: bool = False,
         for s in specs:
             d = asdict(s)
             d["loops"] = list(s.loops)
-            procs.append(subprocess.Popen([sys.executable, "-m", "hasel_sysid.bench_rt", json.dumps(d)],
+            procs.append(subprocess.Popen([sys.executable, "-m", "hasel_bench.realtime", json.dumps(d)],
                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env))
         deadline = time.monotonic() + limit
         for p in procs:

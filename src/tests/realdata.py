@@ -1,4 +1,4 @@
-"""Readers of the measured datasets from real (non-HASEL) systems in ``shared/datasets/``.
+"""Test oracle: readers of the measured datasets from real (non-HASEL) systems in ``shared/datasets/``.
 
 Each reader returns :class:`Dataset` records ``(t_s, u, y)`` with their units and the
 effect that the benchmark's literature documents, so that the diagnosis can be
@@ -17,8 +17,11 @@ reader                           system, input -> output        documented effec
                                  (with/without brake)           dead time; brake: load
 ================================ ============================== =========================
 
-The directory is ``path`` if given, else ``$HASEL_DATASETS``, else
-``<repo>/../shared/datasets``, else ``/work/shared/datasets``.
+The directory is ``path`` if given, else ``$HASEL_DATASETS``, else the first
+``shared/datasets`` directory beside this checkout or above it (a checkout in
+``X/repo`` or ``X/worktrees/repo`` finds ``X/shared/datasets``). Where there is none,
+:data:`MISSING` says how to point the tests at it, and the tests that need it skip
+(``conftest.py``).
 """
 from __future__ import annotations
 
@@ -30,8 +33,8 @@ import numpy as np
 
 from hasel.errors import DataFileError
 
-__all__ = ["Dataset", "datasets_dir", "load_piezo", "load_cascaded_tanks", "load_silverbox", "load_dc_motor",
-           "SILVERBOX_RATE_HZ"]
+__all__ = ["Dataset", "datasets_dir", "find_datasets", "MISSING", "load_piezo", "load_cascaded_tanks",
+           "load_silverbox", "load_dc_motor", "SILVERBOX_RATE_HZ"]
 
 #: Silverbox sampling rate: 10 MHz / 2^14, Hz.
 SILVERBOX_RATE_HZ = 1e7 / 2 ** 14
@@ -76,19 +79,33 @@ class Dataset:
                        self.documented, self.description)
 
 
-def datasets_dir(path: str | os.PathLike[str] | None = None) -> Path:
-    """The datasets directory (see the module docstring for the search order)."""
-    if path is not None:
-        return Path(path)
+def find_datasets() -> Path | None:
+    """The datasets directory (``$HASEL_DATASETS``, else the first ``shared/datasets`` above this file), or None."""
     env = os.environ.get("HASEL_DATASETS")
     if env:
-        return Path(env)
-    here = Path(__file__).resolve()
-    for parent in here.parents:
-        cand = parent.parent / "shared" / "datasets"
-        if (parent / "src").is_dir() and cand.is_dir():
+        return Path(env) if Path(env).is_dir() else None
+    for parent in Path(__file__).resolve().parents:
+        cand = parent / "shared" / "datasets"
+        if cand.is_dir():
             return cand
-    return Path("/work/shared/datasets")
+    return None
+
+
+#: Why the tests that read the real datasets were skipped.
+MISSING = ("the real datasets (shared/datasets) were not found beside or above this checkout: "
+           "set HASEL_DATASETS=DIR to run the tests that read them")
+
+
+def datasets_dir(path: str | os.PathLike[str] | None = None) -> Path:
+    """The datasets directory: ``path`` if given, else :func:`find_datasets`, else a placeholder
+    ``shared/datasets`` that does not exist (reading from it raises, naming it)."""
+    if path is not None:
+        return Path(path)
+    found = find_datasets()
+    if found is not None:
+        return found
+    env = os.environ.get("HASEL_DATASETS")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "datasets"
 
 
 def _file(name: str, path: str | os.PathLike[str] | None) -> Path:
