@@ -1,4 +1,5 @@
-"""``hasel bench --quick``: the table and the JSON have every row and finite values (no timing asserted)."""
+"""``hasel bench --quick``: the table and the JSON have every row and finite values, and what each figure
+measures is what it claims (the same computation, every message, the operating points); no timing target."""
 from __future__ import annotations
 
 import argparse
@@ -8,7 +9,7 @@ import math
 import pytest
 
 from hasel_bench import figures as bench
-from hasel_bench.realtime import WorkerSpec, latency_summary, run_worker
+from hasel_bench.realtime import PERIOD_S, WorkerSpec, latency_summary, run_worker
 
 
 def _finite_numbers(obj, path="") -> list[str]:
@@ -47,23 +48,18 @@ def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
     assert res["2_core_loop"]["max_abs_diff_mm"] < 1e-6  # lsim and the loop's plant agree
     r5 = res["5_ident_recording"]
     assert r5["identify_vs_load"]["files"] == 3 and r5["recorder_vs_bare"]["recorder_bytes"] > 0
-    fl = res["floor"]  # the empty ring: five hops a round, and a ceiling that follows from it
-    assert fl["hop_us"] == pytest.approx(fl["round_us"] / 5) and fl["round_cpu_us"] > 0
-    assert fl["tick_floor_us"] == pytest.approx(fl["round_us"] + fl["hop_us"] + fl["sim_step_us"])
-    assert fl["speed_ceiling"] == pytest.approx(5000.0 / fl["tick_floor_us"])
-    assert any(r["figure"].startswith("1 ceiling") for r in doc["table"])
-    # a hop split into a publish and a delivery (one more subscriber per hop, measured)
-    assert fl["delivery_us"] > 0 and fl["publish_us"] >= 0
+    # the identification timed is a real one: each actuator's six offsets (Table I) are found
+    assert [m["operating_points"] for m in r5["identify_vs_load"]["models"]] == [6, 6, 6]
+    fl = res["floor"]  # the empty ring and one plant step: nothing with this graph's work can beat it
+    assert fl["n_nodes"] == 5 and fl["round_cpu_us"] > 0 and fl["delivery_us"] > 0
     ev = g["events"]
+    assert ev["speed"] < fl["speed_ceiling"]
+    assert any(r["figure"].startswith("1 ceiling") for r in doc["table"])
     assert ev["deliveries_per_tick"] >= ev["publishes_per_tick"] >= 8  # every loop message, each recorded
-    from hasel_bench.graph import pattern_ceiling
-
-    assert ev["pattern_ceiling"] == pytest.approx(pattern_ceiling(fl, ev["publishes_per_tick"],
-                                                                  ev["deliveries_per_tick"], ev["timers_per_tick"]))
     assert ev["speed"] < ev["pattern_ceiling"] * 1.2  # nothing beats its own empty-callback ceiling by much
     assert not (tmp_path / "cache").exists()  # the campaign cache lives for the run only
-    f = res["8_fuzz"]
-    assert f["cases"] > 0 and f["cases"] == f["ok"] + f["rejected"] + f["crashed"] + len(f["hangs"])
+    f = res["8_fuzz"]  # the loaders, on damaged files: rejected or read, never another exception or a hang
+    assert f["cases"] > 0 and f["ok"] > 0 and f["rejected"] > 0 and f["crashed"] == 0 and f["hangs"] == []
     nums = dict(res)
     nums.pop("8_fuzz")  # crash details are text
     assert _finite_numbers(nums) == []
@@ -78,10 +74,11 @@ def test_realtime_worker_reports_every_tick_of_one_loop():
     # every period of the window is either a tick or one the timer skipped (counted from its schedule)
     assert abs(loop["ticks"] + loop["skipped"] - loop["expected"]) <= 1
     s = latency_summary(r["loops"])
-    assert s["samples"] > 0 and s["samples"] + s["unanswered"] == s["ticks"]
+    # the answers to the ticks are matched to them: most ticks get one, typically within the period
+    assert s["ticks"] >= 150 and s["samples"] >= 0.5 * s["ticks"]
     for k in ("p50_us", "p99_us", "max_us"):
         assert math.isfinite(s[k]) and s[k] > 0
-    assert s["p50_us"] <= s["p99_us"] <= s["max_us"]
+    assert s["p50_us"] <= s["p99_us"] <= s["max_us"] and s["p50_us"] < 1e6 * PERIOD_S
 
 
 def test_only_rejects_unknown_figures(tmp_path):

@@ -1,6 +1,7 @@
 """The HV envelope across the node boundary: no sequence of references, gains, run-time
 parameter changes, sensor values (NaN, inf, spikes, stuck, silence, out-of-order or
-duplicated stamps) or clock jumps puts the applied voltage above 9 kV or below v_min."""
+duplicated stamps) or clock jumps puts the applied voltage above 9 kV or below v_min; and
+the check is not vacuous: the loop does apply voltage, up to the ceiling and no further."""
 from __future__ import annotations
 
 import math
@@ -34,6 +35,7 @@ class Loop:
         self.ref = self.probe.create_publisher(Reference, "/reference", topic_qos("/reference"))
         self.clock = self.probe.create_publisher(ClockMsg, "/clock", 10)
         self.applied: list[float] = []
+        self.checked: list[float] = []  # every applied value checked so far (the run must have applied some)
         self.probe.create_subscription(VoltageCommand, "/amp/applied", lambda m: self.applied.append(m.applied_kv),
                                        topic_qos("/amp/applied"))
         self.ex = EventsExecutor(context=self.ctx)
@@ -61,6 +63,45 @@ def loop():
     lp = Loop()
     yield lp
     lp.close()
+    if getattr(lp, "t", 0.0) > 1.0:  # the random run took place: its checks must have seen real voltages
+        assert len(lp.checked) >= 100 and max(lp.checked) > 1.0, \
+            f"the envelope run applied only {len(lp.checked)} values (max {max(lp.checked, default=0.0)} kV)"
+
+
+def _drive(lp: Loop, t: float, stroke_mm: float, n: int) -> float:
+    """``n`` feedback samples of ``stroke_mm`` (+ a tiny ramp: not a stuck sensor), one per 5 ms tick."""
+    for k in range(n):
+        t += 0.005
+        lp.clock.publish(ClockMsg(clock=to_stamp(t)))
+        m = Stroke(stroke_mm=stroke_mm + 1e-4 * k, source=Stroke.SOURCE_LASER)
+        m.header.stamp = to_stamp(t)
+        lp.fb.publish(m)
+        lp.spin()
+    lp.spin(20)
+    return t
+
+
+def test_the_loop_applies_voltage_up_to_the_ceiling_and_no_further():
+    lp = Loop()
+    try:
+        r = Reference(stroke_mm=6.0)
+        r.header.stamp = to_stamp(0.0)
+        lp.ref.publish(r)
+        t = _drive(lp, 0.0, 0.5, 80)  # far below the reference: the PID saturates high
+        assert len(lp.applied) >= 60 and max(lp.applied) == 9.0 and min(lp.applied) >= 0.0
+        assert not lp.amp.set_parameters([Parameter("v_max_kv", value=12.0)])[0].successful
+        lp.applied.clear()
+        t = _drive(lp, t, 0.5, 40)
+        assert len(lp.applied) >= 30 and max(lp.applied) == 9.0  # 12 kV was refused: still the 9 kV ceiling
+        assert lp.amp.set_parameters([Parameter("v_max_kv", value=7.5)])[0].successful
+        lp.applied.clear()
+        t = _drive(lp, t, 0.5, 40)
+        assert len(lp.applied) >= 30 and max(lp.applied) == 7.5 and lp.applied[-1] == 7.5
+        lp.applied.clear()
+        _drive(lp, t, math.nan, 10)  # a non-finite reading: 0 kV (from the controller's hold or the watchdog)
+        assert lp.applied and lp.applied[-1] == 0.0
+    finally:
+        lp.close()
 
 
 values = st.one_of(st.floats(-50, 50), st.sampled_from([math.nan, math.inf, -math.inf, 1e300, -1e300]))
@@ -118,4 +159,5 @@ def check(loop) -> None:
     v_min = loop.amp.limits.v_min_kv
     for kv in loop.applied:
         assert kv == 0.0 or v_min <= kv <= 9.0, (kv, v_min)
+    loop.checked += loop.applied
     loop.applied.clear()

@@ -40,6 +40,37 @@ def _messages(n: int, rng: np.random.Generator) -> list[tuple[int, bytes, int]]:
     return out
 
 
+def _write_ours(path: Path, msgs: list[tuple[int, bytes, int]], compression: str, level: int) -> float:
+    """Write ``msgs`` (channel 1: SampleBatch, 2: Stroke) with :class:`Ros2McapWriter`; CPU s of the writes."""
+    with Ros2McapWriter(path, compression=compression, compression_level=level,
+                        max_chunk_span_s=None, fsync_interval_s=None) as w:
+        w.add_topic("/plant/batch", _BATCH)
+        w.add_topic("/sensor/stroke", _STROKE)
+        t0 = time.process_time()
+        for c, d, t in msgs:
+            w.write(c, d, t, t)
+        w.close()
+        return time.process_time() - t0
+
+
+def _write_bare(path: Path, msgs: list[tuple[int, bytes, int]], compression) -> float:
+    """The same messages through a bare ``mcap.writer.Writer`` (same chunk size); CPU s of the writes."""
+    from mcap.writer import Writer
+
+    defs = {name: message_definition(name).encode() for name in (_BATCH, _STROKE)}
+    w = Writer(str(path), chunk_size=DEFAULT_CHUNK_SIZE, compression=compression)
+    w.start("ros2", "bare")
+    s1 = w.register_schema(_BATCH, "ros2msg", defs[_BATCH])
+    s2 = w.register_schema(_STROKE, "ros2msg", defs[_STROKE])
+    w.register_channel("/plant/batch", "cdr", s1)
+    w.register_channel("/sensor/stroke", "cdr", s2)
+    t0 = time.process_time()
+    for c, d, t in msgs:
+        w.add_message(c, t, d, t)
+    w.finish()
+    return time.process_time() - t0
+
+
 def writer_overhead(n_messages: int = 20000, compression_level: int = 3, repeats: int = 3) -> dict[str, Any]:
     """CPU time per message, ours vs the bare mcap writer (best of ``repeats``).
 
@@ -51,34 +82,15 @@ def writer_overhead(n_messages: int = 20000, compression_level: int = 3, repeats
         ``ours_us``, ``bare_us`` (per message), ``ratio`` and the same without
         compression (``ours_none_us``, ``bare_none_us``, ``ratio_none``).
     """
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType
 
     msgs = _messages(n_messages, np.random.default_rng(1))
-    defs = {name: message_definition(name).encode() for name in (_BATCH, _STROKE)}
 
     def ours(path: Path, comp: str) -> float:
-        with Ros2McapWriter(path, compression=comp, compression_level=compression_level,
-                            max_chunk_span_s=None, fsync_interval_s=None) as w:
-            w.add_topic("/plant/batch", _BATCH)
-            w.add_topic("/sensor/stroke", _STROKE)
-            t0 = time.process_time()
-            for c, d, t in msgs:
-                w.write(c, d, t, t)
-            w.close()
-            return time.process_time() - t0
+        return _write_ours(path, msgs, comp, compression_level)
 
     def bare(path: Path, comp: CompressionType) -> float:
-        w = Writer(str(path), chunk_size=DEFAULT_CHUNK_SIZE, compression=comp)
-        w.start("ros2", "bare")
-        s1 = w.register_schema(_BATCH, "ros2msg", defs[_BATCH])
-        s2 = w.register_schema(_STROKE, "ros2msg", defs[_STROKE])
-        w.register_channel("/plant/batch", "cdr", s1)
-        w.register_channel("/sensor/stroke", "cdr", s2)
-        t0 = time.process_time()
-        for c, d, t in msgs:
-            w.add_message(c, t, d, t)
-        w.finish()
-        return time.process_time() - t0
+        return _write_bare(path, msgs, comp)
 
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
