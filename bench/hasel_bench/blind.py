@@ -28,7 +28,6 @@ Run ``python -m hasel_bench.blind --cases 30`` (``--quick`` for the CI size).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -41,7 +40,7 @@ import numpy as np
 from hasel import paper
 from hasel.effects import EFFECT_NAMES, TruthActuator, sample_effect
 from hasel.plant import amplifier_filter_tf
-from hasel_bench.harness import case_directory, diagnose_files
+from hasel_bench.harness import case_directory, diagnose_files, result_line, say_stderr, write_json
 
 __all__ = ["BlindCase", "excitation", "make_case", "run_blind", "score", "main"]
 
@@ -246,9 +245,7 @@ def run_blind(n_cases: int = 30, seed: int = 0, workers: int = 1, *, quick: bool
             cases.append(make_case(i, seed * 100003 + i, directory, quick=quick))
         say(f"generated {n_cases} cases in {time.perf_counter() - t0:.1f} s; diagnosing blind in "
             f"{workers} spawned process(es)")
-        results = diagnose_files([(c.path, True) for c in cases], workers, lambda r: say(
-            f"  {os.path.basename(r['path'])}: {', '.join(r['names']) or 'no effect'}"
-            f"{' ERROR ' + r['error'] if r.get('error') else ''} ({r['seconds']:.1f} s)"))
+        results = diagnose_files([(c.path, True) for c in cases], workers, lambda r: say(result_line(r)))
         s = score(cases, {r["path"]: r for r in results})
         s["wall_s"] = time.perf_counter() - t0
         return s
@@ -263,12 +260,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="short excitations (CI size)")
     p.add_argument("--json", help="write the full scores here")
     a = p.parse_args(argv)
-    s = run_blind(a.cases, a.seed, a.workers, quick=a.quick,
-                  progress=lambda m: (sys.stderr.write(m + "\n"), sys.stderr.flush()))
+    s = run_blind(a.cases, a.seed, a.workers, quick=a.quick, progress=say_stderr)
     print(format_report(s))
-    if a.json:
-        with open(a.json, "w") as fh:
-            json.dump(s, fh, indent=1, default=float)
+    write_json(s, a.json)
     return 0
 
 

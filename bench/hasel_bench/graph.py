@@ -3,7 +3,7 @@
 - :func:`graph_speed`: the closed loop (plant, driver, filter, controller, amplifier,
   reference) with the MCAP recorder, in one process, lockstep in simulated time
   (:class:`~hasel_sysid.graph.NodeGraph`); simulated seconds per wall second. The
-  graph's in-memory collector (a test helper that keeps every message in lists) is
+  graph's in-memory collector (what steps and calibrate read their signals from) is
   detached, so the graph measured is the one a recorded experiment needs. The
   recording is then read back to check that simulated time worked: one amplifier
   output per 5 ms tick, on the exact 5 ms grid, and every 10 kHz sample present.

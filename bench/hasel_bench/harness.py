@@ -11,14 +11,17 @@ Used by :mod:`hasel_bench.blind` (the project's own effect library) and
 from __future__ import annotations
 
 import contextlib
+import json
 import multiprocessing as mp
+import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["case_directory", "diagnose_file", "diagnose_files"]
+__all__ = ["case_directory", "diagnose_file", "diagnose_files", "result_line", "say_stderr", "write_json"]
 
 
 @contextlib.contextmanager
@@ -75,3 +78,23 @@ def diagnose_files(jobs: Sequence[tuple[str, bool]], workers: int = 1,
             if on_result is not None:
                 on_result(r)
     return results
+
+
+def result_line(r: dict) -> str:
+    """One progress line for a result of :func:`diagnose_file`: the file, what was named, the time."""
+    how = "" if r.get("with_model", True) else " (no model)"
+    err = f" ERROR {r['error']}" if r.get("error") else ""
+    return f"  {os.path.basename(r['path'])}{how}: {', '.join(r['names']) or 'no effect'}{err} ({r['seconds']:.1f} s)"
+
+
+def say_stderr(message: str) -> None:
+    """Progress on stderr, flushed (the scripts' ``progress``)."""
+    sys.stderr.write(message + "\n")
+    sys.stderr.flush()
+
+
+def write_json(scores: dict, path: str | None) -> None:
+    """Write the full scores to ``path`` (numpy numbers as floats); nothing when ``path`` is None."""
+    if path:
+        with open(path, "w") as fh:
+            json.dump(scores, fh, indent=1, default=float)

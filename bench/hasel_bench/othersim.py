@@ -52,7 +52,6 @@ Run ``python -m hasel_bench.othersim --cases 28 --json FILE``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -65,7 +64,7 @@ import numpy as np
 from scipy import linalg, signal
 
 from hasel import paper
-from hasel_bench.harness import case_directory, diagnose_files
+from hasel_bench.harness import case_directory, diagnose_files, result_line, say_stderr, write_json
 
 __all__ = [
     "EFFECT_KINDS", "ForeignEffect", "sample_foreign", "play_operator", "prandtl_ishlinskii", "duhem",
@@ -903,10 +902,7 @@ def run_othersim(n_cases: int, seed: int, progress: Callable[[str], None] | None
             cases.append(make_case(i, cs, effs, directory, short=short))
         say(f"generated {len(cases)} cases in {time.perf_counter() - t0:.1f} s")
         jobs = [(c.path, True) for c in cases] + [(c.path, False) for c in cases[:max(0, no_model_cases)]]
-        results = diagnose_files(jobs, 1, lambda r: say(
-            f"  {os.path.basename(r['path'])} ({'model' if r['with_model'] else 'no model'}): "
-            f"{', '.join(r['names']) or 'no effect'}{' ERROR ' + r['error'] if r.get('error') else ''} "
-            f"({r['seconds']:.1f} s)"))
+        results = diagnose_files(jobs, 1, lambda r: say(result_line(r)))
         s = score(cases, [r for r in results if r["with_model"]])
         nm = [r for r in results if not r["with_model"]]
         s["no_model"] = score(cases[:len(nm)], nm) if nm else None
@@ -922,14 +918,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-model", type=int, default=0, help="cases also diagnosed without a model")
     p.add_argument("--json", help="write the full scores here")
     a = p.parse_args(argv)
-    s = run_othersim(a.cases, a.seed, lambda m: (sys.stderr.write(m + "\n"), sys.stderr.flush()),
-                     no_model_cases=a.no_model)
+    s = run_othersim(a.cases, a.seed, say_stderr, no_model_cases=a.no_model)
     print(format_report(s))
     if s["no_model"]:
         print(format_report(s["no_model"], "without a model"))
-    if a.json:
-        with open(a.json, "w") as fh:
-            json.dump(s, fh, indent=1, default=float)
+    write_json(s, a.json)
     return 0
 
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from hasel import interrupt
 from hasel.errors import BadInputError, HaselError
 from hasel.outputs import Output, add_overwrite_option, check_outputs
-from hasel.validate import seed, text_file
+from hasel.validate import text_file
 
 __all__ = ["main", "Command", "COMMANDS", "ENTRY_POINT_GROUP", "commands", "build_parser"]
 
