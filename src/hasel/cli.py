@@ -115,13 +115,18 @@ def _workspace_paths() -> list[str]:
 
 def _unavailable(name: str, err: BaseException) -> Command:
     """A stand-in for a declared command whose declaring module cannot be imported: running it says why."""
+    def add(p: argparse.ArgumentParser) -> None:
+        _rest_args(p)
+        p.set_defaults(_unavailable=err)
+
     def run(args: argparse.Namespace) -> int:
         raise err
 
-    return Command(name, f"[unavailable: {err}]", _rest_args, run, True)
+    return Command(name, f"[unavailable: {err}]", add, run, True)
 
 
 def _rest_args(p: argparse.ArgumentParser) -> None:
+    """Accept any arguments (of a command that cannot run here: it will say why instead)."""
     p.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
 
 
@@ -292,7 +297,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         ensure_ros_environment()
     parser = build_parser(first or "")
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra and getattr(args, "_unavailable", None) is None:  # as parse_args; an unavailable command says why
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     cmd: Command | None = getattr(args, "_command", None)
     if cmd is None:
         parser.print_help()

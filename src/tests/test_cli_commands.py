@@ -1,0 +1,42 @@
+"""Where ``hasel`` finds its subcommands: the core's table and the ``hasel.commands`` entry points."""
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+
+from hasel import cli
+
+
+def test_help_lists_the_commands_and_imports_no_command_module():
+    code = ("import sys\nfrom hasel.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit as e:\n    assert e.code in (0, None)\n"
+            "heavy = [m for m in sys.modules if m.split('.')[0] in ('numpy', 'scipy', 'rclpy')\n"
+            "         or m in ('hasel.ident.cli', 'hasel.diagnose.cli', 'hasel_sysid.steps', 'hasel_bench.figures')]\n"
+            "print('HEAVY', heavy)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "HASEL_ROS_ENV_READY")}
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert "HEAVY []" in p.stdout
+    for name in ("identify", "diagnose", "info", "salvage", "env"):
+        assert f"    {name} " in p.stdout
+
+
+def test_entry_point_commands_are_found_beside_the_core_ones():
+    cmds = {c.name: c for c in cli.commands()}
+    assert {"env", "identify", "diagnose", "info", "salvage"} <= set(cmds)
+    assert not any(c.needs_ros for n, c in cmds.items() if n in ("identify", "diagnose", "info", "salvage"))
+    if importlib.util.find_spec("hasel_bench") is not None:  # installed by make setup
+        assert cmds["bench"].needs_ros and cmds["bench"].help.startswith("the benchmarks")
+    if importlib.util.find_spec("hasel_sysid") is not None:  # the built workspace
+        assert {"steps", "compare", "calibrate", "chirp", "record", "replay", "demo"} <= set(cmds)
+
+
+def test_a_declared_command_whose_package_is_missing_asks_for_make_setup(monkeypatch, capsys):
+    ghost = cli._unavailable("ghost", ModuleNotFoundError("No module named 'hasel_ros'", name="hasel_ros"))
+    monkeypatch.setattr(cli, "commands", lambda: (*cli.COMMANDS, ghost))
+    monkeypatch.setenv("HASEL_ROS_ENV_READY", "1")  # no re-execution into the workspace's environment
+    assert cli.main(["ghost", "--anything", "x"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["hasel ghost: needs the built ROS workspace (hasel_ros not found); run `make setup`"]
