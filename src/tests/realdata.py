@@ -92,8 +92,8 @@ def find_datasets() -> Path | None:
 
 
 #: Why the tests that read the real datasets were skipped.
-MISSING = ("the real datasets (shared/datasets) were not found beside or above this checkout: "
-           "set HASEL_DATASETS=DIR to run the tests that read them")
+MISSING = ("the real datasets (shared/datasets) were not found beside or above this checkout, and "
+           "HASEL_DATASETS is unset or not a directory: set HASEL_DATASETS=DIR to run the tests that read them")
 
 
 def datasets_dir(path: str | os.PathLike[str] | None = None) -> Path:
