@@ -24,6 +24,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import interrupt
 from hasel.errors import BadInputError
 from hasel.io.mcapfile import RawMessage, iter_messages
+from hasel.timeconv import ns_to_s, ns_to_stamp
 from hasel_ros.rosutil import message_class
 
 __all__ = ["RawMessage", "read_raw", "Replayer", "parse_remaps", "run_replay", "run_record"]
@@ -86,7 +87,7 @@ class Replayer:
         """Publish one recorded message (and /clock at its log time when asked)."""
         if self.clock_pub is not None and m.topic != "/clock":
             c = ClockMsg()
-            c.clock.sec, c.clock.nanosec = divmod(m.log_time_ns, 1_000_000_000)
+            c.clock.sec, c.clock.nanosec = ns_to_stamp(m.log_time_ns)
             self.clock_pub.publish(c)
         self.publisher(m.topic, m.type_name).publish(m.data)
         self.count += 1
@@ -116,7 +117,7 @@ def run_replay(args: argparse.Namespace) -> int:
             if t0_log is None:
                 t0_log = m.log_time_ns
             if args.rate > 0:
-                due = t0_wall + (m.log_time_ns - t0_log) * 1e-9 / args.rate
+                due = t0_wall + ns_to_s(m.log_time_ns - t0_log) / args.rate
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
