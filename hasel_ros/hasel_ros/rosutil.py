@@ -21,10 +21,10 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hasel.timeconv import ns_to_s, ns_to_stamp, s_to_ns, s_to_stamp, stamp_to_ns, stamp_to_s
+from hasel.timeconv import ns_to_s, s_to_ns, s_to_stamp, stamp_to_ns, stamp_to_s
 from hasel.topics import QosSpec, topic
 
-__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "ns_stamp", "from_stamp", "stamp_ns", "now_s", "declare",
+__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "stamp_ns", "now_s", "declare",
            "diagnostic", "run_node", "validate_with", "float64_array", "Deadline"]
 
 
@@ -59,12 +59,6 @@ def message_class(type_name: str) -> type:
 def to_stamp(t_s: float) -> Time:
     """Seconds (float) -> builtin_interfaces/Time, rounded to the nearest nanosecond."""
     sec, nanosec = s_to_stamp(t_s)
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def ns_stamp(t_ns: int) -> Time:
-    """Integer nanoseconds -> builtin_interfaces/Time (exact)."""
-    sec, nanosec = ns_to_stamp(t_ns)
     return Time(sec=sec, nanosec=nanosec)
 
 

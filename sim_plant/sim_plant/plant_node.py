@@ -44,8 +44,8 @@ from hasel.amplifier import HeldOutput, Reason
 from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
-from hasel.timeconv import ns_to_s, ns_to_stamp, s_to_ns, stamp_to_ns
-from hasel_ros.rosutil import declare, float64_array, run_node, topic_qos
+from hasel.timeconv import ns_to_s, ns_to_stamp, s_to_ns
+from hasel_ros.rosutil import declare, float64_array, run_node, stamp_ns, topic_qos
 from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["PlantNode", "main", "make_actuator"]
@@ -195,7 +195,7 @@ class PlantNode(Node):
                 self.latencies_ns.append(self.get_clock().now().nanoseconds - ns)
                 self._answered = True
             return
-        ns = stamp_to_ns(stamp.sec, stamp.nanosec)
+        ns = stamp_ns(stamp)
         if not self.running or self.done or ns != self.tick_stamp_ns() or self._watchdog_answer is not None:
             return  # not for this tick (late, duplicate, early, or after its first answer): ignore
         if watchdog:  # the tick's first answer, but its messages may still be in flight: step once they land

@@ -10,6 +10,10 @@ reason): in strict mode it raises :class:`~hasel.errors.DataFileError`, in toler
 mode (salvage, ``hasel info``) the stream skips the damaged record, looks for the next
 intact chunk and carries on.
 
+:func:`iter_messages` builds on the stream: the raw messages of a file in log-time
+order (what ``hasel replay`` publishes), with :func:`read_summary`'s chunk index
+bounding how many are held back.
+
 Format: https://mcap.dev/spec (records are opcode u8, length u64, body; little endian).
 """
 from __future__ import annotations
