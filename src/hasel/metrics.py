@@ -12,7 +12,7 @@ from hasel.errors import BadInputError
 __all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "nrmse"]
 
 
-def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
+def nrmse(y: np.ndarray, y_hat: np.ndarray, *, bias_free: bool = False) -> float:
     """Normalised root-mean-square error ``||y - y_hat|| / ||y - mean(y)||`` (0 is perfect).
 
     The one definition of the toolkit (identification, diagnosis, closed-loop
@@ -24,6 +24,9 @@ def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
     ----------
     y, y_hat : ndarray, shape (n,)
         Measured and simulated signal, same unit.
+    bias_free : bool
+        Remove the error's mean first: the error the simulation would have with the
+        best constant offset added (a model judged on its dynamics, not its level).
 
     Returns
     -------
@@ -40,6 +43,8 @@ def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
     if y.shape != y_hat.shape or y.ndim != 1 or y.size == 0:
         raise BadInputError(f"y and y_hat must be non-empty 1-D arrays of one length, got {y.shape}, {y_hat.shape}")
     d0, d1 = y - y.mean(), y - y_hat
+    if bias_free:
+        d1 = d1 - d1.mean()
     # einsum, not dot/norm: no BLAS threads to wake for a long 1-D product
     den = float(np.sqrt(np.einsum("i,i->", d0, d0)))
     return float(np.sqrt(np.einsum("i,i->", d1, d1))) / den if den > 0 else math.inf

@@ -48,6 +48,9 @@ def test_nrmse_is_normalised_by_the_spread_about_the_mean_not_the_range():
     assert nrmse(y, y + err) == pytest.approx(2.0 / math.sqrt(130.0), rel=1e-15)
     assert nrmse(y + 100.0, y + 100.0 + err) == nrmse(y, y + err)  # an offset changes nothing
     assert nrmse(np.full(4, 2.0), np.zeros(4)) == math.inf
+    # bias-free: a constant offset of the simulation costs nothing, the rest counts as before
+    assert nrmse(y, y + 0.7, bias_free=True) < 1e-15 and nrmse(y, y + 0.7) > 0.1
+    assert nrmse(y, y + err + 0.7, bias_free=True) == pytest.approx(nrmse(y, y + err), rel=1e-14)
 
 
 @pytest.mark.parametrize("a, b", [(np.zeros(3), np.zeros(4)), (np.zeros((2, 2)), np.zeros((2, 2))), ([], [])])
