@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from hasel.errors import BadInputError
 from hasel.ident.tffit import TFModel
 from hasel.lti import zoh_sos
 from hasel.metrics import nrmse
