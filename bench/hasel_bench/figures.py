@@ -101,6 +101,7 @@ from pathlib import Path
 from typing import Any
 
 from hasel.errors import BadInputError, HaselError
+from hasel.outputs import json_safe
 
 __all__ = ["add_arguments", "run", "Row", "format_table", "FIGURES"]
 
@@ -607,18 +608,6 @@ def _parse_only(text: str) -> list[int]:
     return want
 
 
-def _json_safe(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
-        return _json_safe(obj.item())
-    return obj
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the benchmarks; print the table; write the JSON. Exit 1 if a figure could not be measured."""
     figures = _parse_only(args.only)
@@ -658,7 +647,7 @@ def run(args: argparse.Namespace) -> int:
            "seconds_per_figure": seconds, "cpus": os.cpu_count(), "domain_id": b.domain, "table": [asdict(r) for r in b.rows],
            "results": b.results, "errors": errors}
     with open(out, "w") as fh:
-        json.dump(_json_safe(doc), fh, indent=1, allow_nan=False)
+        json.dump(json_safe(doc), fh, indent=1, allow_nan=False)
         fh.write("\n")
     b.say(f"wrote {out}")
     return 1 if errors else 0

@@ -48,7 +48,8 @@ _CSV_CELLS = [b"nan", b"NaN", b"inf", b"-inf", b"1e999", b"-1e999", b"", b"abc",
 
 def make_seeds(directory: Path, rng: np.random.Generator) -> list[Path]:
     """Write the valid seed files into ``directory``; return their paths."""
-    from hasel.io import Ros2McapWriter, encode, encode_sample_batch
+    from hasel.io import Ros2McapWriter
+    from hasel_bench.iospeed import encode, encode_sample_batch
 
     directory.mkdir(parents=True, exist_ok=True)
     paths = []

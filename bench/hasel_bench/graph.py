@@ -119,7 +119,7 @@ def graph_speed(executor: str, duration_s: float, domain_id: int, directory: str
 
 def bench_messages(n: int, rng: np.random.Generator) -> list[tuple[str, bytes, int]]:
     """``n`` serialised messages, half 50-sample SampleBatch, half Stroke: (topic, bytes, time ns)."""
-    from hasel.io import encode, encode_sample_batch
+    from hasel_bench.iospeed import encode, encode_sample_batch
 
     out = []
     for i in range(n):

@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import struct
 import tempfile
 import time
 from pathlib import Path
@@ -16,15 +17,57 @@ from typing import Any
 
 import numpy as np
 
-from hasel.io.cdr import encode, encode_sample_batch
 from hasel.io.loader import load_signals
 from hasel.io.msgdefs import message_definition
 from hasel.io.writer import DEFAULT_CHUNK_SIZE, Ros2McapWriter
 
-__all__ = ["writer_overhead", "load_speed"]
+__all__ = ["writer_overhead", "load_speed", "encode", "encode_sample_batch"]
 
 _BATCH = "hasel_msgs/msg/SampleBatch"
 _STROKE = "hasel_msgs/msg/Stroke"
+_ENCODERS: dict[str, Any] = {}
+
+
+def encode(type_name: str, msg: dict[str, Any]) -> bytes:
+    """CDR bytes of one message given as a mapping, serialised by ``mcap_ros2`` (benchmark inputs only).
+
+    The toolkit itself never encodes CDR (the recorder writes what rclpy received).
+    """
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    enc = _ENCODERS.get(type_name)
+    if enc is None:
+        enc = _ENCODERS[type_name] = serialize_dynamic(type_name, message_definition(type_name))[type_name]
+    return bytes(enc(msg))
+
+
+_HEAD = struct.Struct("<iII").pack  # header.stamp (sec, nanosec), frame_id length
+_U32 = struct.Struct("<I").pack
+_F64 = struct.Struct("<d").pack
+
+
+def encode_sample_batch(stamp_ns: int, sample_period_s: float, voltage_kv: Any = (), stroke_mm: Any = (),
+                        true_stroke_mm: Any = (), elapsed_us: Any = (), frame_id: str = "") -> bytes:
+    """CDR bytes of a ``hasel_msgs/msg/SampleBatch`` from numpy arrays (kV, mm, mm, us), fast.
+
+    The same bytes as :func:`encode` (offsets relative to the payload after the 4-byte
+    encapsulation header, 8-byte values aligned to 8); for writing big benchmark logs.
+    """
+    from hasel.timeconv import ns_to_stamp
+
+    name = frame_id.encode("utf-8")
+    out = bytearray(b"\x00\x01\x00\x00")
+    out += _HEAD(*ns_to_stamp(stamp_ns), len(name) + 1) + name + b"\x00"
+    out += b"\x00" * ((-(len(out) - 4)) % 8)
+    out += _F64(float(sample_period_s))
+    for arr in (voltage_kv, stroke_mm, true_stroke_mm, elapsed_us):
+        a = np.asarray(arr, dtype="<f8").ravel()
+        out += b"\x00" * ((-(len(out) - 4)) % 4)
+        out += _U32(a.size)
+        if a.size:
+            out += b"\x00" * ((-(len(out) - 4)) % 8)
+            out += a.tobytes()
+    return bytes(out)
 
 
 def _messages(n: int, rng: np.random.Generator) -> list[tuple[int, bytes, int]]:

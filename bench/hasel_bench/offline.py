@@ -87,7 +87,8 @@ def write_campaign(path: str | os.PathLike[str], gain: float = 1.0, seed: int = 
     dict
         ``samples``, ``simulated_s``, ``write_s`` and ``file_mib``.
     """
-    from hasel.io import Ros2McapWriter, encode, encode_sample_batch
+    from hasel.io import Ros2McapWriter
+    from hasel_bench.iospeed import encode, encode_sample_batch
     from hasel.plant import NominalActuator, NominalConfig
     from hasel.sensors import LaserConfig, LaserSensor
     from hasel.signals import protocol_schedule

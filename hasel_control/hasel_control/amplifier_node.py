@@ -25,7 +25,7 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Watchdog
 from hasel.faults import Notice
-from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, from_stamp, run_node, to_stamp,
+from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, from_stamp, now_s, run_node, to_stamp,
                                topic_qos, validate_with)
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
@@ -90,7 +90,7 @@ class HvAmplifierNode(Node):
         return self.core.tripped
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return now_s(self)
 
     def _publish(self, stamp, result: tuple[Applied, Notice | None]) -> None:
         out, notice = result

@@ -14,7 +14,7 @@ from rclpy.node import Node
 
 from hasel import paper
 from hasel.errors import BadInputError
-from hasel_ros.rosutil import declare, run_node, to_stamp, topic_qos
+from hasel_ros.rosutil import declare, now_s, run_node, to_stamp, topic_qos
 from hasel_msgs.msg import Reference
 
 __all__ = ["ReferenceNode", "main"]
@@ -31,7 +31,7 @@ class ReferenceNode(Node):
         start = declare(self, "start_s", -1.0, "time of the first reference, s (negative: now)", lo=-1.0, hi=1e9)
         if not self.sequence or not all(math.isfinite(x) for x in self.sequence):
             raise BadInputError(f"sequence_mm must be a non-empty list of finite numbers, got {self.sequence}")
-        self.start_s = start if start >= 0 else self.get_clock().now().nanoseconds * 1e-9
+        self.start_s = start if start >= 0 else now_s(self)
         self.pub = self.create_publisher(Reference, "reference", topic_qos("/reference"))
         for i, r in enumerate(self.sequence):
             msg = Reference(stroke_mm=r)

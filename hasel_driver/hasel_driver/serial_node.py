@@ -24,7 +24,7 @@ from rclpy.node import Node
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.serialproto import LineBuffer, encode
-from hasel_ros.rosutil import declare, diagnostic, run_node, topic_qos
+from hasel_ros.rosutil import declare, diagnostic, now_s, run_node, topic_qos
 from hasel_msgs.msg import SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["SerialBridgeNode", "main"]
@@ -84,7 +84,7 @@ class SerialBridgeNode(Node):
             self.link_ok = False
             self._send("Z")
             self.diag_pub.publish(diagnostic(self, DiagnosticStatus.ERROR, "MCU link lost: 0 kV commanded",
-                                             self.get_clock().now().nanoseconds * 1e-9, silent_s=silent,
+                                             now_s(self), silent_s=silent,
                                              bad_lines=self.lines.bad))
 
     def on_poll(self) -> None:
@@ -102,7 +102,7 @@ class SerialBridgeNode(Node):
             if not self.link_ok:
                 self.link_ok = True
                 self.diag_pub.publish(diagnostic(self, DiagnosticStatus.OK, "MCU link back",
-                                                 self.get_clock().now().nanoseconds * 1e-9))
+                                                 now_s(self)))
             if f.kind == "T":
                 m = SensorTiming(elapsed_us=f.fields[2], period_us=1e6 / paper.TIMER_TRIGGER_HZ,
                                  sequence=int(f.fields[0]) % 2**32)

@@ -21,10 +21,11 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from hasel.timeconv import ns_to_s, s_to_ns, s_to_stamp, stamp_to_ns, stamp_to_s
 from hasel.topics import QosSpec, topic
 
-__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "stamp_ns", "declare", "diagnostic", "run_node",
-           "validate_with", "float64_array", "Deadline"]
+__all__ = ["qos", "topic_qos", "message_class", "to_stamp", "from_stamp", "stamp_ns", "now_s", "declare",
+           "diagnostic", "run_node", "validate_with", "float64_array", "Deadline"]
 
 
 def qos(spec: QosSpec) -> QoSProfile:
@@ -57,18 +58,23 @@ def message_class(type_name: str) -> type:
 
 def to_stamp(t_s: float) -> Time:
     """Seconds (float) -> builtin_interfaces/Time, rounded to the nearest nanosecond."""
-    ns = int(round(t_s * 1e9))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = s_to_stamp(t_s)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def from_stamp(stamp: Time) -> float:
-    """builtin_interfaces/Time -> seconds (float)."""
-    return stamp.sec + stamp.nanosec * 1e-9
+    """builtin_interfaces/Time -> seconds (float; the same float as the core's ``ns_to_s`` of its ns)."""
+    return stamp_to_s(stamp.sec, stamp.nanosec)
 
 
 def stamp_ns(stamp: Time) -> int:
     """builtin_interfaces/Time -> integer nanoseconds (exact: what the core's decisions compare)."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+    return stamp_to_ns(stamp.sec, stamp.nanosec)
+
+
+def now_s(node: Node) -> float:
+    """The node's clock (ROS time; simulated under ``use_sim_time``), float seconds."""
+    return ns_to_s(node.get_clock().now().nanoseconds)
 
 
 def float64_array(values) -> array.array:
@@ -98,7 +104,7 @@ class Deadline:
 
     def __init__(self, node: Node, timeout_s: float, repeat_s: float, callback: Callable[[], None]) -> None:
         self._callback = callback
-        self._repeat_ns = max(1, int(round(repeat_s * 1e9)))
+        self._repeat_ns = max(1, s_to_ns(repeat_s))
         self._late = False  # True once the timeout has passed: firing every repeat_s
         self.timer = node.create_timer(repeat_s, self._fire)
         self.timer.cancel()
@@ -107,12 +113,12 @@ class Deadline:
     @property
     def timeout_s(self) -> float:
         """Time without a feed before the first call, s."""
-        return (self._timeout_ns - 1) * 1e-9
+        return ns_to_s(self._timeout_ns - 1)
 
     @timeout_s.setter
     def timeout_s(self, value: float) -> None:
         # one nanosecond more: the call comes strictly after the timeout, as `age > timeout` does
-        self._timeout_ns = max(1, int(round(value * 1e9))) + 1
+        self._timeout_ns = max(1, s_to_ns(value)) + 1
         if not self._late:
             self.timer.timer_period_ns = self._timeout_ns
 

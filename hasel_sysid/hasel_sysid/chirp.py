@@ -30,8 +30,9 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hasel import paper
 from hasel.errors import BadInputError
 from hasel.signals import Schedule, protocol_schedule
+from hasel.timeconv import s_to_ns
 from hasel.validate import finite, seed
-from hasel_ros.rosutil import to_stamp, topic_qos
+from hasel_ros.rosutil import stamp_ns, to_stamp, topic_qos
 from hasel_msgs.msg import ExperimentMarker, SampleBatch, VoltageCommand
 
 __all__ = ["ExperimentNode", "run", "run_chirp"]
@@ -44,7 +45,7 @@ class ExperimentNode(Node):
         super().__init__("hasel_experiment", **kwargs)
         self.schedule = schedule
         self.n_per_tick = int(round(period_s * schedule.rate_hz))
-        self.period_ns = int(round(period_s * 1e9))
+        self.period_ns = s_to_ns(period_s)
         self.n_ticks = int(math.ceil(schedule.command_kv.size / self.n_per_tick))
         self.pre = np.zeros(self.n_ticks, dtype=bool)  # ticks that are charge reversal
         for r in schedule.records:
@@ -70,7 +71,7 @@ class ExperimentNode(Node):
 
     def on_clock(self, msg: ClockMsg) -> None:
         """Publish the command of the tick that starts at this time."""
-        ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        ns = stamp_ns(msg.clock)
         k = int(round(ns / self.period_ns))
         if k == self.last_tick or k >= self.n_ticks:
             return

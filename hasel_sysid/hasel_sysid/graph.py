@@ -29,6 +29,7 @@ from rclpy.time_source import TimeSource
 from hasel import interrupt, paper
 from hasel.errors import HaselError
 from hasel.plant import Actuator
+from hasel.timeconv import ns_to_s
 from hasel_control.amplifier_node import HvAmplifierNode
 from hasel_control.controller_node import PidControllerNode
 from hasel_control.reference_node import ReferenceNode
@@ -218,7 +219,7 @@ class NodeGraph:
         self.plant.start()
         limit = None if wall_timeout_s is None else time.monotonic() + wall_timeout_s
         # spin in long stretches (one call per simulated chunk): each return to Python costs
-        chunk = max(self.plant.period_ns * 1e-9, min(1.0, duration_s / 20))
+        chunk = max(ns_to_s(self.plant.period_ns), min(1.0, duration_s / 20))
         while not self.plant.done:
             target = min(duration_s, self.plant.now_s() + chunk)
             fut = Future()

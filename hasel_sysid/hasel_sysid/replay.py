@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import argparse
 import signal
-import struct
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import rclpy
@@ -24,43 +22,28 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hasel import interrupt
-from hasel.errors import BadInputError, DataFileError
+from hasel.errors import BadInputError
+from hasel.io.mcapfile import RawMessage, iter_messages
+from hasel.timeconv import ns_to_s, ns_to_stamp
 from hasel_ros.rosutil import message_class
 
 __all__ = ["RawMessage", "read_raw", "Replayer", "parse_remaps", "run_replay", "run_record"]
 
 
-@dataclass(frozen=True)
-class RawMessage:
-    """One recorded message: topic, type name, CDR bytes, log and publish time (ns)."""
-
-    topic: str
-    type_name: str
-    data: bytes
-    log_time_ns: int
-    publish_time_ns: int
-
-
 def read_raw(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[RawMessage]:
-    """Recorded messages of ``path`` in log-time order (streaming; DataFileError if damaged)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    """Recorded messages of ``path`` in log-time order, streamed by the project's MCAP reader.
 
+    Raises
+    ------
+    BadInputError
+        No such file.
+    DataFileError
+        A damaged or non-MCAP file (says where; ``hasel info`` and ``hasel salvage`` help).
+    """
     p = Path(path)
     if not p.is_file():
         raise BadInputError(f"no such file: {p}")
-    try:
-        with p.open("rb") as f:
-            reader = make_reader(f)
-            for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
-                                                                 log_time_order=True):
-                name = schema.name if schema is not None else ""
-                if name.count("/") == 1:  # older rosbag2 naming pkg/Type
-                    name = name.replace("/", "/msg/")
-                yield RawMessage(channel.topic, name, message.data, message.log_time, message.publish_time)
-    except (McapError, ValueError, EOFError, OSError, struct.error, KeyError, IndexError) as err:
-        raise DataFileError(f"{p}: cannot be replayed ({type(err).__name__}: {err}); "
-                            f"try `hasel info {p}` and `hasel salvage`") from err
+    return iter_messages(p, topics)
 
 
 def parse_remaps(remaps: Sequence[str]) -> dict[str, str]:
@@ -104,7 +87,7 @@ class Replayer:
         """Publish one recorded message (and /clock at its log time when asked)."""
         if self.clock_pub is not None and m.topic != "/clock":
             c = ClockMsg()
-            c.clock.sec, c.clock.nanosec = divmod(m.log_time_ns, 1_000_000_000)
+            c.clock.sec, c.clock.nanosec = ns_to_stamp(m.log_time_ns)
             self.clock_pub.publish(c)
         self.publisher(m.topic, m.type_name).publish(m.data)
         self.count += 1
@@ -134,7 +117,7 @@ def run_replay(args: argparse.Namespace) -> int:
             if t0_log is None:
                 t0_log = m.log_time_ns
             if args.rate > 0:
-                due = t0_wall + (m.log_time_ns - t0_log) * 1e-9 / args.rate
+                due = t0_wall + ns_to_s(m.log_time_ns - t0_log) / args.rate
                 delay = due - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)

@@ -44,7 +44,8 @@ from hasel.amplifier import HeldOutput, Reason
 from hasel.plant import Actuator
 from hasel.sensors import LaserConfig, StrainConfig
 from hasel.simulator import PlantBlock, PlantSimulator
-from hasel_ros.rosutil import declare, float64_array, run_node, topic_qos
+from hasel.timeconv import ns_to_s, ns_to_stamp, s_to_ns
+from hasel_ros.rosutil import declare, float64_array, run_node, stamp_ns, topic_qos
 from hasel_msgs.msg import SampleBatch, SensorTiming, Stroke, VoltageCommand
 
 __all__ = ["PlantNode", "main", "make_actuator"]
@@ -96,7 +97,7 @@ class PlantNode(Node):
                                   strain=StrainConfig(noise_us=strain_noise, noise_us_per_kv=strain_noise_kv),
                                   strain_curve=getattr(act, "strain_curve", None))
         self.get_logger().info(f"plant: {plantspec.describe(act)}")
-        self.period_ns = int(round(period * 1e9))
+        self.period_ns = s_to_ns(period)
         self.trigger_period_us = 1e6 / self.sim.strain.config.trigger_hz
         self.held = HeldOutput(3)  # the DAC holds; the MCU's own watchdog zeroes after 3 missed periods
         self._watchdog_answer: float | None = None  # an amplifier-watchdog output waiting for the tick to settle
@@ -136,10 +137,10 @@ class PlantNode(Node):
 
     def now_s(self) -> float:
         """Simulated time of the current tick, s."""
-        return self.tick_stamp_ns() * 1e-9
+        return ns_to_s(self.tick_stamp_ns())
 
     def _stamp(self, msg, ns: int) -> None:
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_stamp(ns)
 
     def notify_at(self, t_s: float, future) -> None:
         """Complete ``future`` once simulated time reaches ``t_s`` (or the run is done)."""
@@ -187,7 +188,7 @@ class PlantNode(Node):
         if self.clock_mode == "wall":
             self.held.fresh(command)
             return
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        ns = stamp_ns(stamp)
         if not self.running or self.done or ns != self.tick_stamp_ns() or self._watchdog_answer is not None:
             return  # not for this tick (late, duplicate, early, or after its first answer): ignore
         if watchdog:  # the tick's first answer, but its messages may still be in flight: step once they land
@@ -236,7 +237,7 @@ class PlantNode(Node):
         msg = self._batch_msg  # refilled each tick: publish() copies it at once
         msg.sample_period_s = block.dt_s
         start_ns = (self.tick_stamp_ns() - self.period_ns) if t0_ns is None else t0_ns
-        self._stamp(msg, start_ns + int(round(block.dt_s * 1e9)))  # first sample: end of the first 0.1 ms
+        self._stamp(msg, start_ns + s_to_ns(block.dt_s))  # first sample: end of the first 0.1 ms
         msg.voltage_kv = float64_array(block.applied_kv)
         msg.stroke_mm = float64_array(block.laser_mm)
         msg.true_stroke_mm = float64_array(block.true_stroke_mm)
@@ -249,7 +250,7 @@ class PlantNode(Node):
         # one message object per topic, refilled each tick: publish() copies it at once
         if self.clock_pub is not None:
             c = self._clock_msg
-            c.clock.sec, c.clock.nanosec = divmod(ns, 1_000_000_000)
+            c.clock.sec, c.clock.nanosec = ns_to_stamp(ns)
             self.clock_pub.publish(c)
         self.sequence += 1
         timing = self._timing_msg

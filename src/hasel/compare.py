@@ -7,14 +7,13 @@ as ``/topic.field``) or a CSV file with a header row.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hasel.errors import BadInputError, DataFileError
-from hasel.metrics import StepMetrics, steps_from_sequence
+from hasel.metrics import StepMetrics, nrmse, steps_from_sequence
 
 __all__ = ["ClosedLoopLog", "load_closed_loop", "reference_steps", "nrmse", "measured_steps", "DEFAULTS"]
 
@@ -108,13 +107,6 @@ def reference_steps(log: ClosedLoopLog, tol_s: float = 2e-3) -> tuple[list[float
         raise BadInputError(f"{log.source}: the log ends {end - times[-1]:.3f} s after the last reference change; "
                             f"it needs about {hold:.3f} s")
     return [float(v) for v in values], hold, float(times[0])
-
-
-def nrmse(measured: np.ndarray, simulated: np.ndarray) -> float:
-    """||measured - simulated|| / ||measured - mean(measured)|| (0: identical)."""
-    m, s = np.asarray(measured, float), np.asarray(simulated, float)
-    den = float(np.linalg.norm(m - m.mean()))
-    return float(np.linalg.norm(m - s) / den) if den > 0 else math.inf
 
 
 def measured_steps(log: ClosedLoopLog, sequence: list[float], hold_s: float, t0_s: float) -> list[StepMetrics]:

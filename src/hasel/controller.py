@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 from hasel.faults import ERROR, OK, Notice, PlausibilityGate, StuckDetector
 from hasel.pid import DualModePid, PidOutput
+from hasel.timeconv import ns_to_s, s_to_ns
 from hasel.validate import positive
 
 __all__ = ["ReferenceSchedule", "ControlStep", "ControllerCore"]
@@ -59,7 +60,7 @@ class ReferenceSchedule:
 
     def __call__(self, t_s: float) -> float:
         """The reference (mm) in effect at ``t_s`` seconds (rounded to the nearest ns)."""
-        return self.at(int(round(t_s * 1e9)))
+        return self.at(s_to_ns(t_s))
 
 
 @dataclass(slots=True)  # not frozen: built once per 200 Hz sample, where a frozen init costs more
@@ -115,7 +116,7 @@ class ControllerCore:
     @property
     def stale_after_ns(self) -> int:
         """Age (ns) beyond which the feedback is stale."""
-        return int(round(self.stale_periods * self.pid.config.period_s * 1e9))
+        return s_to_ns(self.stale_periods * self.pid.config.period_s)
 
     def on_sample(self, t_ns: int, z_mm: float) -> ControlStep:
         """One feedback sample ``z_mm`` (mm) measured at ``t_ns`` (ns) -> what to command.
@@ -161,5 +162,5 @@ class ControllerCore:
         self.stale = stale
         if stale:
             self.pid.hold()
-        return Notice(ERROR if stale else OK, f"feedback {'stale' if stale else 'ok'}: {why}", t_ns * 1e-9,
+        return Notice(ERROR if stale else OK, f"feedback {'stale' if stale else 'ok'}: {why}", ns_to_s(t_ns),
                       {"integrator_kv": self.pid.i_kv})

@@ -33,6 +33,7 @@ from hasel.errors import BadInputError
 from hasel.faults import PlausibilityGate, StuckDetector
 from hasel.pid import DualModeConfig, DualModePid
 from hasel.simulator import PlantSimulator
+from hasel.timeconv import ns_to_s, s_to_ns
 
 __all__ = ["FEEDBACKS", "LoopConfig", "LoopFaults", "LoopResult", "default_calibration", "step_reference",
            "run_closed_loop"]
@@ -55,7 +56,7 @@ def step_reference(sequence_mm: list[float], hold_s: float) -> ReferenceSchedule
         raise BadInputError(f"the reference sequence must be finite, got {seq}")
     schedule = ReferenceSchedule()
     for i, r in enumerate(seq):
-        schedule.set(int(round(i * hold_s * 1e9)), r)
+        schedule.set(s_to_ns(i * hold_s), r)
     return schedule
 
 
@@ -142,7 +143,7 @@ def run_closed_loop(sim: PlantSimulator, reference: Callable[[float], float], du
     scheduled = isinstance(reference, ReferenceSchedule)
     if scheduled:
         ctl.references = reference
-    period_ns = int(round(sim.period_s * 1e9))
+    period_ns = s_to_ns(sim.period_s)
     n = int(round(duration_s / sim.period_s))
     rec = {k: np.empty(n) for k in ("t", "r", "laser", "strain", "filt", "fb", "req", "cmd", "mode", "i")}
     reason = np.empty(n, dtype=np.int64)
@@ -152,7 +153,7 @@ def run_closed_loop(sim: PlantSimulator, reference: Callable[[float], float], du
     for k in range(n):
         rd = sim.latest()
         t_ns = sim.tick * period_ns  # the plant's stamp of this tick
-        t_s = t_ns * 1e-9  # the nodes' clock in seconds
+        t_s = ns_to_s(t_ns)  # the nodes' clock in seconds
         if not scheduled:
             ctl.references.set(t_ns, reference(rd.t_s))
         us = _inject(flt.timing, t_s, rd.elapsed_us)

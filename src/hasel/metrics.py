@@ -1,4 +1,5 @@
-"""Step-response metrics as in the paper's Table II: 10-90 % rise, 5 % settling, overshoot."""
+"""How well a response does: step metrics as in the paper's Table II (10-90 % rise, 5 %
+settling, overshoot) and the normalised error of a simulation against a measurement."""
 from __future__ import annotations
 
 import math
@@ -6,7 +7,47 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence"]
+from hasel.errors import BadInputError
+
+__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "nrmse"]
+
+
+def nrmse(y: np.ndarray, y_hat: np.ndarray, *, bias_free: bool = False) -> float:
+    """Normalised root-mean-square error ``||y - y_hat|| / ||y - mean(y)||`` (0 is perfect).
+
+    The one definition of the toolkit (identification, diagnosis, closed-loop
+    comparison): the error is normalised by the measured signal's spread about its
+    mean (its standard deviation times sqrt(n)), never by its range; 1 is as good as
+    predicting the mean, and MATLAB's ``compare`` fit is ``100 (1 - NRMSE)`` %.
+
+    Parameters
+    ----------
+    y, y_hat : ndarray, shape (n,)
+        Measured and simulated signal, same unit.
+    bias_free : bool
+        Remove the error's mean first: the error the simulation would have with the
+        best constant offset added (a model judged on its dynamics, not its level).
+
+    Returns
+    -------
+    float
+        ``inf`` for a constant ``y`` (nothing to normalise by).
+
+    Raises
+    ------
+    BadInputError
+        If the two are not non-empty 1-D arrays of one length.
+    """
+    y = np.asarray(y, float)
+    y_hat = np.asarray(y_hat, float)
+    if y.shape != y_hat.shape or y.ndim != 1 or y.size == 0:
+        raise BadInputError(f"y and y_hat must be non-empty 1-D arrays of one length, got {y.shape}, {y_hat.shape}")
+    d0, d1 = y - y.mean(), y - y_hat
+    if bias_free:
+        d1 = d1 - d1.mean()
+    # einsum, not dot/norm: no BLAS threads to wake for a long 1-D product
+    den = float(np.sqrt(np.einsum("i,i->", d0, d0)))
+    return float(np.sqrt(np.einsum("i,i->", d1, d1))) / den if den > 0 else math.inf
 
 
 @dataclass(frozen=True)

@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import tempfile
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from hasel.errors import BadInputError
 
 __all__ = ["Output", "add_overwrite_option", "check_output", "check_outputs", "write_text", "write_bytes",
-           "file_mode", "replacing"]
+           "file_mode", "replacing", "json_safe"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +136,29 @@ def replacing(path: str | os.PathLike) -> Iterator[Path]:
         if isinstance(err, OSError):
             raise BadInputError(f"cannot write {p}: {err.strerror or err}") from err
         raise
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` ready for strict JSON: numpy arrays and scalars made plain, NaN and inf as ``None``.
+
+    Mappings get string keys; tuples become lists; anything else with an ``item()``
+    (a numpy scalar) is unwrapped; other objects are returned as they are.
+    """
+    import numpy as np  # here: the command line imports this module at start, before it needs numpy
+
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        x = float(obj)
+        return x if math.isfinite(x) else None
+    if hasattr(obj, "item") and callable(obj.item):
+        return json_safe(obj.item())
+    return obj

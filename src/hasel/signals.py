@@ -1,4 +1,4 @@
-"""Excitation signals for identification, and the paper's whole chirp campaign.
+"""Excitation signals for identification, the paper's whole chirp campaign, and resampling.
 
 Three excitations, all sampled at a given rate:
 
@@ -18,6 +18,9 @@ Three excitations, all sampled at a given rate:
 :func:`protocol_schedule` builds a whole campaign (Table I): for each DC offset a
 charge-reversing pre-conditioning hold, a settling hold at the offset, then the
 excitation repeated back to back, as one command array (kV) with segment records.
+
+:func:`uniform_grid` puts irregularly sampled records on a uniform time grid (the one
+resampler of identification and diagnosis).
 """
 from __future__ import annotations
 
@@ -32,8 +35,11 @@ from hasel.validate import finite, positive
 
 __all__ = [
     "paper_chirp", "linear_chirp", "Multisine", "odd_multisine", "SegmentRecord", "Schedule",
-    "protocol_schedule", "EXCITATION_KINDS",
+    "protocol_schedule", "EXCITATION_KINDS", "uniform_grid", "JITTER_TOLERANCE",
 ]
+
+#: Largest step deviation, relative to the median step, still taken as uniform sampling.
+JITTER_TOLERANCE = 0.01
 
 #: Names accepted by ``protocol_schedule(kind=...)``.
 EXCITATION_KINDS = ("paper", "linear", "multisine")
@@ -371,3 +377,41 @@ def protocol_schedule(offsets_kv: Sequence[float] = paper.CHIRP_PROTOCOL["offset
     command = np.concatenate(parts)
     return Schedule(t_s=np.arange(command.size) / rate_hz, command_kv=command, rate_hz=rate_hz,
                     records=records)
+
+
+def uniform_grid(t_s: np.ndarray, *signals: np.ndarray,
+                 tol: float = JITTER_TOLERANCE) -> tuple[np.ndarray, list[np.ndarray], float, bool]:
+    """Signals sampled at strictly increasing times, on a uniform grid of their median step.
+
+    If every step is within ``tol`` (relative) of the median step, the samples are
+    returned as they are. Otherwise (jitter or gaps) each signal is linearly
+    interpolated onto ``t_s[0] + k * step``, ``k = 0 .. floor((t_s[-1] - t_s[0]) / step)``.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n,)
+        Sample times, s, strictly increasing (n >= 2).
+    *signals : ndarray, shape (n,)
+        Values at those times (any unit).
+    tol : float
+        Relative step deviation still taken as uniform.
+
+    Returns
+    -------
+    t_s : ndarray
+        The uniform times, s.
+    signals : list of ndarray
+        The signals at those times.
+    step_s : float
+        The median step, s.
+    resampled : bool
+        True if the samples were interpolated.
+    """
+    t = np.asarray(t_s, float)
+    xs = [np.asarray(x, float) for x in signals]
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    if np.max(np.abs(dt - step)) <= tol * step:
+        return t, xs, step, False
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
+    return grid, [np.interp(grid, t, x) for x in xs], step, True

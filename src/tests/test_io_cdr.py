@@ -1,4 +1,4 @@
-"""CDR: the generated field extractor and the encoder against mcap_ros2's codec and real rosbag2 data."""
+"""CDR: the generated field extractor against mcap_ros2's serializer and real rosbag2 data."""
 from __future__ import annotations
 
 import struct
@@ -11,11 +11,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
-from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
-from hasel.io.cdr import CdrError, Extractor, compile_extractor, encode, numeric_fields
+from hasel.io.cdr import CdrError, Extractor, compile_extractor, numeric_fields
 from hasel.io.msgdefs import MessageDefinitionError, message_definition, parse_schema
+
+from cdrwrite import encode
 
 ROSBAG2 = datasets_dir() / "rosbag2"
 SEP = "\n" + "=" * 80 + "\n"
@@ -51,9 +53,8 @@ def _get(msg, path):
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(complex_msg)
-def test_extractor_and_encoder_agree_with_mcap_ros2(msg):
+def test_extractor_reads_what_mcap_ros2_serialised(msg):
     ref = serialize_dynamic("pkg/msg/Complex", COMPLEX)["pkg/msg/Complex"](msg)
-    assert encode("pkg/msg/Complex", msg, COMPLEX) == ref
     paths = SCALARS + ["fixed[0]", "fixed[2]", "bounded", "tail", "inner.seq", "header.frame_id", "tail[1]"]
     ex = compile_extractor("pkg/msg/Complex", COMPLEX, paths)
     out = dict(zip(paths, ex(ref, 0, len(ref))))
@@ -70,9 +71,6 @@ def test_extractor_and_encoder_agree_with_mcap_ros2(msg):
         assert out["tail[1]"] == msg["tail"][1]
     else:
         assert np.isnan(out["tail[1]"])
-    # and the reference decoder reads our encoding back
-    dec = generate_dynamic("pkg/msg/Complex", COMPLEX)["pkg/msg/Complex"](encode("pkg/msg/Complex", msg, COMPLEX))
-    assert dec.value == msg["value"] and dec.big == msg["big"] and list(dec.tail) == msg["tail"]
 
 
 def test_sample_batch_extraction_with_numpy_arrays():
@@ -85,8 +83,6 @@ def test_sample_batch_extraction_with_numpy_arrays():
                "sample_period_s": 1e-4, "voltage_kv": arrays[0], "stroke_mm": arrays[1],
                "true_stroke_mm": arrays[2], "elapsed_us": arrays[3]}
         data = encode(t, msg)
-        assert data == serialize_dynamic(t, text)[t]({**msg, **{k: list(v) for k, v in msg.items()
-                                                                if isinstance(v, np.ndarray)}})
         fields = ["voltage_kv", "stroke_mm", "true_stroke_mm", "elapsed_us"]
         ex = compile_extractor(t, text, ["sample_period_s"] + fields)
         r = ex(b"\x00" * 3 + data, 3, 3 + len(data))  # at an odd offset inside a larger buffer
@@ -162,24 +158,3 @@ def test_real_rosbag2_messages_decode_like_mcap_ros2():
                     assert value == want, path
             seen += 1
     assert seen == 7
-
-
-def test_fast_sample_batch_encoder_is_byte_identical():
-    from hasel.io.cdr import encode_sample_batch
-
-    rng = np.random.default_rng(9)
-    for frame in ["", "a", "plant", "x" * 8]:
-        for counts in [(50, 50, 50, 50), (0, 0, 0, 0), (3, 0, 2, 1)]:
-            arrays = [rng.normal(size=n) for n in counts]
-            t_ns = int(rng.integers(0, 2**40))
-            fast = encode_sample_batch(t_ns, 1e-4, *arrays, frame_id=frame)
-            msg = {"header": {"stamp": {"sec": t_ns // 10**9, "nanosec": t_ns % 10**9}, "frame_id": frame},
-                   "sample_period_s": 1e-4, "voltage_kv": arrays[0], "stroke_mm": arrays[1],
-                   "true_stroke_mm": arrays[2], "elapsed_us": arrays[3]}
-            assert fast == encode(BATCH_T, msg)
-            ref = serialize_dynamic(BATCH_T, message_definition(BATCH_T))[BATCH_T](
-                {**msg, **{k: [float(x) for x in v] for k, v in msg.items() if isinstance(v, np.ndarray)}})
-            assert fast == ref
-
-
-BATCH_T = "hasel_msgs/msg/SampleBatch"

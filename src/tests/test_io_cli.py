@@ -11,7 +11,9 @@ import pytest
 from mcap.reader import make_reader
 
 from hasel.cli import main
-from hasel.io import Ros2McapWriter, encode
+from hasel.io import Ros2McapWriter
+
+from cdrwrite import encode
 
 ROSBAG2 = datasets_dir() / "rosbag2"
 

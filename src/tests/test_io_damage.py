@@ -12,8 +12,10 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from hasel.errors import DataFileError
-from hasel.io import Ros2McapWriter, encode, info, load_signals, salvage
+from hasel.io import Ros2McapWriter, info, load_signals, salvage
 from hasel.io.mcapfile import MAGIC, McapStream
+
+from cdrwrite import encode
 
 STROKE = "hasel_msgs/msg/Stroke"
 BATCH = "hasel_msgs/msg/SampleBatch"

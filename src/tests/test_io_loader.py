@@ -12,8 +12,10 @@ from mcap_ros2.decoder import DecoderFactory
 
 from hasel.errors import BadInputError, DataFileError
 from hasel.io import (
-    Marker, Ros2McapWriter, encode, list_topics, load_io, load_markers, load_signals, marker_segments,
+    Marker, Ros2McapWriter, list_topics, load_io, load_markers, load_signals, marker_segments,
 )
+
+from cdrwrite import encode
 
 BATCH = "hasel_msgs/msg/SampleBatch"
 ROSBAG2 = datasets_dir() / "rosbag2"

@@ -19,9 +19,11 @@ from mcap_ros2.decoder import DecoderFactory
 
 from hasel.errors import BadInputError
 from hasel.io import (
-    QosProfile, Ros2McapWriter, encode, load_signals, message_definition, offered_qos_yaml, salvage,
+    QosProfile, Ros2McapWriter, load_signals, message_definition, offered_qos_yaml, salvage,
 )
 from hasel.io.writer import INFINITE_NS
+
+from cdrwrite import encode
 
 BATCH = "hasel_msgs/msg/SampleBatch"
 STROKE = "hasel_msgs/msg/Stroke"
@@ -161,15 +163,18 @@ def test_chunks_close_on_log_time_span(tmp_path):
         assert make_reader(f).get_summary().statistics.chunk_count == 10
 
 
+STROKE_HEX = encode(STROKE, {"stroke_mm": 1.0}).hex()
+
 CHILD = """
 import sys, time
-from hasel.io import Ros2McapWriter, encode
+from hasel.io import Ros2McapWriter
+data = bytes.fromhex(sys.argv[2])  # one serialised Stroke
 w = Ros2McapWriter(sys.argv[1], chunk_size=4000, max_chunk_span_s=None, fsync_interval_s=0.05)
 c = w.add_topic('/s', 'hasel_msgs/msg/Stroke')
 chunks = 0
 i = 0
 while True:
-    w.write(c, encode('hasel_msgs/msg/Stroke', {'stroke_mm': float(i)}), 10**9 + i, 10**9 + i, i)
+    w.write(c, data, 10**9 + i, 10**9 + i, i)
     i += 1
     if w.chunk_count != chunks:
         chunks = w.chunk_count
@@ -180,7 +185,7 @@ while True:
 
 def test_sigkill_loses_only_the_open_chunk(tmp_path):
     path = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(path)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(path), STROKE_HEX], stdout=subprocess.PIPE, text=True)
     try:
         reported = 0
         deadline = time.monotonic() + 60
@@ -205,12 +210,12 @@ def test_sigkill_loses_only_the_open_chunk(tmp_path):
 
 SIGTERM_CHILD = """
 import signal, sys
-from hasel.io import Ros2McapWriter, encode
+from hasel.io import Ros2McapWriter
 w = Ros2McapWriter(sys.argv[1], chunk_size=3000)
 c = w.add_topic('/s', 'hasel_msgs/msg/Stroke')
 stop = []
 signal.signal(signal.SIGTERM, lambda signum, frame: stop.append(signum))  # the handler only flags
-data = encode('hasel_msgs/msg/Stroke', {'stroke_mm': 1.0})
+data = bytes.fromhex(sys.argv[2])  # one serialised Stroke
 i = 0
 while not stop:
     w.write(c, data, i + 1, i + 1, i % 2**32)
@@ -223,7 +228,7 @@ w.close()  # the shutdown path closes, as the recorder node does after SIGINT/SI
 
 def test_sigterm_then_close_on_the_shutdown_path_leaves_a_valid_file(tmp_path):
     path = tmp_path / "term.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", SIGTERM_CHILD, str(path)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-c", SIGTERM_CHILD, str(path), STROKE_HEX], stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"
     time.sleep(0.05)
     proc.send_signal(signal.SIGTERM)

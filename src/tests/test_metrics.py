@@ -1,4 +1,4 @@
-"""hasel.metrics: step metrics against closed forms."""
+"""hasel.metrics: step metrics against closed forms, and the NRMSE."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from hasel.metrics import step_metrics
+from hasel.errors import BadInputError
+from hasel.metrics import nrmse, step_metrics
 
 
 def test_first_order_rise_and_settling_closed_form():
@@ -36,3 +37,31 @@ def test_never_reached_gives_nan():
     m = step_metrics(t, np.full(t.size, 2.0), 0.0, 1.0, 2.0, 12.0)
     assert math.isnan(m.rise_s) and math.isnan(m.settling_s)
     assert m.to_json()["rise_s"] is None
+
+
+def test_nrmse_is_normalised_by_the_spread_about_the_mean_not_the_range():
+    y = np.array([0.0, 1.0, 2.0, 3.0, 14.0])  # mean 4, sum of squares about it 130, range 14
+    err = np.array([1.0, -1.0, 1.0, -1.0, 0.0])
+    assert nrmse(y, y) == 0.0
+    assert nrmse(y, np.full(5, y.mean())) == pytest.approx(1.0)
+    # ||err|| = 2, ||y - mean|| = sqrt(130); by the range it would be 2 / (sqrt(5) * 14)
+    assert nrmse(y, y + err) == pytest.approx(2.0 / math.sqrt(130.0), rel=1e-15)
+    assert nrmse(y + 100.0, y + 100.0 + err) == nrmse(y, y + err)  # an offset changes nothing
+    assert nrmse(np.full(4, 2.0), np.zeros(4)) == math.inf
+    # bias-free: a constant offset of the simulation costs nothing, the rest counts as before
+    assert nrmse(y, y + 0.7, bias_free=True) < 1e-15 and nrmse(y, y + 0.7) > 0.1
+    assert nrmse(y, y + err + 0.7, bias_free=True) == pytest.approx(nrmse(y, y + err), rel=1e-14)
+
+
+@pytest.mark.parametrize("a, b", [(np.zeros(3), np.zeros(4)), (np.zeros((2, 2)), np.zeros((2, 2))), ([], [])])
+def test_nrmse_refuses_arrays_that_do_not_pair(a, b):
+    with pytest.raises(BadInputError, match="1-D arrays of one length"):
+        nrmse(a, b)
+
+
+def test_the_callers_share_one_nrmse():
+    from hasel import compare
+    from hasel.diagnose import prep
+    from hasel.ident import validation
+
+    assert compare.nrmse is prep.nrmse is validation.nrmse is nrmse

@@ -7,7 +7,7 @@ from scipy import signal
 
 from hasel import paper
 from hasel.errors import BadInputError, UnsafeParameterError
-from hasel.signals import linear_chirp, odd_multisine, paper_chirp, protocol_schedule
+from hasel.signals import linear_chirp, odd_multisine, paper_chirp, protocol_schedule, uniform_grid
 
 
 def _inst_freq_hz(x: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -124,3 +124,20 @@ def test_protocol_schedule_rejects_unsafe_and_bad_arguments():
         paper_chirp(np.arange(3.0), 0.0, 1.0, 0.0)
     with pytest.raises(BadInputError, match="odd lines"):
         odd_multisine(100.0, 1.0, 10.0, 12.0)
+
+
+def test_uniform_grid_keeps_uniform_samples_and_interpolates_jittered_ones():
+    t = np.arange(100) / 1024  # a binary step: the grid's end is exact
+    x = np.sin(2 * np.pi * 5 * t)
+    tu, (xu,), step, resampled = uniform_grid(t, x)
+    assert not resampled and np.array_equal(tu, t) and np.array_equal(xu, x)
+    assert step == 1 / 1024
+    # 0.5 % jitter is still uniform; a gap of 3 steps is not
+    assert not uniform_grid(t + 0.005 / 1024 * (np.arange(100) % 2), x)[3]
+    tg = np.delete(t, [40, 41])
+    line = 3.0 * tg - 1.0
+    tu, (lu, xu), step, resampled = uniform_grid(tg, line, np.interp(tg, t, x))
+    assert resampled and step == 1 / 1024
+    np.testing.assert_allclose(tu, t, atol=1e-12)  # the grid of the median step from the first sample
+    np.testing.assert_allclose(lu, 3.0 * tu - 1.0, atol=1e-12)  # linear interpolation is exact on a line
+    assert xu[40] == pytest.approx(x[39] + (x[42] - x[39]) / 3, abs=1e-12)

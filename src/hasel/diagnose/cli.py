@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from hasel.errors import BadInputError
+from hasel.outputs import json_safe
 
 __all__ = ["add_arguments", "run", "json_safe"]
 
@@ -45,24 +46,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="working rate, Hz (default: about 25 times the input's band)")
     p.add_argument("--max-effects", type=int, default=3, metavar="N", help="most effects named (default 3)")
     p.add_argument("--export-plant", metavar="FILE.json", help="write the augmented model as a plant-model file")
-
-
-def json_safe(obj: Any) -> Any:
-    """``obj`` with numpy scalars/arrays made plain and NaN/inf replaced by ``None``."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, (np.bool_, bool)):
-        return bool(obj)
-    if isinstance(obj, (np.integer, int)):
-        return int(obj)
-    if isinstance(obj, (np.floating, float)):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    return obj
 
 
 def _write_atomic(path: str, text: str) -> None:

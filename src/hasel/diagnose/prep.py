@@ -38,16 +38,11 @@ from scipy import signal, stats
 
 from hasel.errors import BadInputError
 from hasel.lti import zoh_sos
+from hasel.metrics import nrmse
+from hasel.signals import uniform_grid
 
 __all__ = ["Record", "Prepared", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
            "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
-
-
-def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
-    """``||y - y_hat|| / ||y - mean(y)||`` (0 is perfect; MATLAB fit = 100 (1 - NRMSE) %)."""
-    y = np.asarray(y, float)
-    den = float(np.linalg.norm(y - y.mean()))
-    return float(np.linalg.norm(y - np.asarray(y_hat, float)) / den) if den > 0 else float("inf")
 
 
 @dataclass
@@ -137,12 +132,9 @@ def _uniform(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, n
         keep = np.concatenate([[True], dt > 0])
         t, u, y = t[keep], u[keep], y[keep]
         dt = np.diff(t)
-    step = float(np.median(dt))
-    if step <= 0:
+    if float(np.median(dt)) <= 0:
         raise BadInputError("the log's time stamps do not increase")
-    if np.max(np.abs(dt - step)) > 0.01 * step:  # jitter or gaps: resample on a uniform grid
-        grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
-        u, y, t = np.interp(grid, t, u), np.interp(grid, t, y), grid
+    t, (u, y), step, _ = uniform_grid(t, u, y)  # jitter or gaps: resampled on a uniform grid
     return t, u, y, 1.0 / step
 
 

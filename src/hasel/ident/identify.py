@@ -51,6 +51,7 @@ from hasel.ident.checks import ModelCheck, check_model
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
 from hasel.ident.timefit import arx_start, interleaved, oe_fit
 from hasel.ident.validation import compare_fit
+from hasel.signals import uniform_grid
 
 __all__ = ["IdentOptions", "OperatingPoint", "Validation", "IdentResult", "identify", "unit_from_name",
            "check_signals"]
@@ -440,15 +441,12 @@ def check_signals(t_s: Any, u: Any, y: Any, *, input_name: str = "input",
 
 
 def _uniform(t: np.ndarray, u: np.ndarray, y: np.ndarray, notes: list[str]) -> tuple[np.ndarray, ...]:
-    dt = np.diff(t)
-    med = float(np.median(dt))
-    if np.max(np.abs(dt - med)) <= 0.01 * med:
-        return t, u, y, med
-    gaps = int(np.count_nonzero(dt > 1.5 * med))
-    tu = t[0] + med * np.arange(int(np.floor((t[-1] - t[0]) / med)) + 1)
-    notes.append(f"irregular sampling (median step {med:.6g} s, {gaps} gap(s) over 1.5 steps): "
-                 f"resampled onto a uniform grid by linear interpolation")
-    return tu, np.interp(tu, t, u), np.interp(tu, t, y), med
+    tu, (uu, yu), med, resampled = uniform_grid(t, u, y)
+    if resampled:
+        gaps = int(np.count_nonzero(np.diff(t) > 1.5 * med))
+        notes.append(f"irregular sampling (median step {med:.6g} s, {gaps} gap(s) over 1.5 steps): "
+                     f"resampled onto a uniform grid by linear interpolation")
+    return tu, uu, yu, med
 
 
 def _refine_period(u: np.ndarray, approx_samples: float) -> float:

@@ -12,33 +12,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from hasel.errors import BadInputError
 from hasel.ident.tffit import TFModel
 from hasel.lti import zoh_sos
+from hasel.metrics import nrmse
 from hasel.validate import positive
 
 __all__ = ["nrmse", "compare_fit", "simulate"]
-
-
-def nrmse(y: np.ndarray, y_hat: np.ndarray) -> float:
-    """``||y - y_hat|| / ||y - mean(y)||`` (``inf`` for a constant ``y``).
-
-    Parameters
-    ----------
-    y, y_hat : ndarray, shape (n,)
-        Measured and simulated outputs, same unit.
-
-    Returns
-    -------
-    float
-    """
-    y = np.asarray(y, float)
-    y_hat = np.asarray(y_hat, float)
-    if y.shape != y_hat.shape or y.ndim != 1 or y.size == 0:
-        raise BadInputError(f"y and y_hat must be non-empty 1-D arrays of one length, got {y.shape}, {y_hat.shape}")
-    d0, d1 = y - y.mean(), y - y_hat
-    den = float(np.sqrt(np.einsum("i,i->", d0, d0)))
-    return float(np.sqrt(np.einsum("i,i->", d1, d1))) / den if den > 0 else float("inf")
 
 
 def compare_fit(y: np.ndarray, y_hat: np.ndarray) -> float:

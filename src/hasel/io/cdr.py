@@ -1,4 +1,4 @@
-"""ROS 2 CDR (XCDR1, as rmw_fastrtps writes it) without ROS: a fast field extractor and an encoder.
+"""ROS 2 CDR (XCDR1, as rmw_fastrtps writes it) without ROS: a fast field extractor.
 
 Extractor: for a message type and the fields wanted (``"header.stamp.sec"``,
 ``"voltage_kv"``, ``"data[2]"``) it generates, once, a straight-line Python function that
@@ -9,10 +9,9 @@ so that the caller can read them with :func:`numpy.frombuffer` without a copy pe
 Every length read from the data is bounded by the message's end, so damaged bytes give
 :class:`CdrError`, never a hang or a huge allocation.
 
-Encoder: message values (mappings or objects, numpy arrays welcome for primitive arrays)
-to CDR bytes, byte-identical to ``mcap_ros2``'s serializer for well-formed input.
 Alignment is relative to the start of the payload (after the 4-byte encapsulation
-header); 8-byte types align to 8 (XCDR1).
+header); 8-byte types align to 8 (XCDR1). The toolkit never encodes CDR itself: the
+recorder writes the bytes rclpy received.
 """
 from __future__ import annotations
 
@@ -22,18 +21,13 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 
 from hasel.errors import DataFileError
 from hasel.io.msgdefs import (
-    PRIMITIVE_FORMATS, FieldType, MessageDefinitionError, MsgSpec, message_definition, parse_schema,
-    resolve_type, short_name,
+    PRIMITIVE_FORMATS, FieldType, MessageDefinitionError, MsgSpec, parse_schema, resolve_type, short_name,
 )
 
-__all__ = ["CdrError", "FieldRequest", "Extractor", "compile_extractor", "numeric_fields",
-           "CdrEncoder", "encoder_for", "encode", "encode_sample_batch", "ENCAPSULATION_LE"]
-
-ENCAPSULATION_LE = b"\x00\x01\x00\x00"
+__all__ = ["CdrError", "FieldRequest", "Extractor", "compile_extractor", "numeric_fields"]
 
 
 class CdrError(DataFileError):
@@ -471,175 +465,3 @@ class Extractor:
 def compile_extractor(type_name: str, schema_text: str, paths: Sequence[str]) -> Extractor:
     """An :class:`Extractor` of ``paths`` for messages of ``type_name`` with schema ``schema_text``."""
     return Extractor(parse_schema(type_name, schema_text), type_name, paths)
-
-
-# --------------------------------------------------------------------------- encoder
-
-
-def _get(msg: Any, name: str) -> Any:
-    if isinstance(msg, Mapping):
-        return msg.get(name)
-    return getattr(msg, name, None)
-
-
-class _Out:
-    __slots__ = ("buf",)
-
-    def __init__(self) -> None:
-        self.buf = bytearray(ENCAPSULATION_LE)
-
-    def align(self, a: int) -> None:
-        pad = (-(len(self.buf) - 4)) % a
-        if pad:
-            self.buf += b"\x00" * pad
-
-
-_PACK = {name: struct.Struct("<" + code).pack for name, (code, _) in PRIMITIVE_FORMATS.items()}
-_PACK_U32 = struct.Struct("<I").pack
-
-
-class CdrEncoder:
-    """Serialises messages of one type to CDR (little endian).
-
-    Missing fields take zero / empty values (as mcap_ros2 does); primitive arrays may be
-    numpy arrays. Raises :class:`~hasel.errors.BadInputError` for a value that does not
-    fit its field (e.g. a fixed array of the wrong length).
-    """
-
-    def __init__(self, type_name: str, definition: str | None = None) -> None:
-        self.type_name = type_name
-        text = message_definition(type_name) if definition is None else definition
-        self.specs = parse_schema(type_name, text)
-        self.root = resolve_type(self.specs, short_name(type_name))
-
-    def __call__(self, msg: Any) -> bytes:
-        """CDR bytes of ``msg`` (a mapping or an object with the fields as attributes)."""
-        out = _Out()
-        try:
-            self._message(out, self.root, msg)
-        except (struct.error, TypeError, ValueError, OverflowError) as err:
-            raise MessageDefinitionError(f"cannot encode {self.type_name}: {err}") from err
-        return bytes(out.buf)
-
-    def _message(self, out: _Out, spec: MsgSpec, msg: Any) -> None:
-        if not spec.fields:
-            out.buf += b"\x00"
-            return
-        for f in spec.fields:
-            self._field(out, f.type, f.name, _get(msg, f.name) if msg is not None else None)
-
-    def _field(self, out: _Out, t: FieldType, name: str, value: Any) -> None:
-        if t.is_array:
-            seq: Any = [] if value is None else value
-            n = len(seq)
-            if t.is_fixed_array:
-                if n != t.array_size:
-                    raise ValueError(f"field {name!r} needs {t.array_size} elements, got {n}")
-            else:
-                if t.is_upper_bound and t.array_size is not None and n > t.array_size:
-                    raise ValueError(f"field {name!r} holds at most {t.array_size} elements, got {n}")
-                out.align(4)
-                out.buf += _PACK_U32(n)
-            if t.is_primitive:
-                code, size = PRIMITIVE_FORMATS[t.base]
-                if n:
-                    out.align(size)
-                    if t.base in ("byte", "char", "uint8") and isinstance(seq, (bytes, bytearray, memoryview)):
-                        out.buf += bytes(seq)
-                    else:
-                        dtype = {"?": np.uint8, "B": np.uint8, "b": np.int8}.get(code, np.dtype("<" + code))
-                        arr = np.asarray(seq)
-                        if code == "?":
-                            arr = arr.astype(bool)
-                        elif code in "fd":
-                            arr = arr.astype(float)
-                        elif not np.issubdtype(arr.dtype, np.integer) and arr.size:
-                            arr = arr.astype(np.int64)
-                        info = np.iinfo(dtype) if np.issubdtype(np.dtype(dtype), np.integer) else None
-                        if info is not None and arr.size and (arr.min() < info.min or arr.max() > info.max):
-                            raise ValueError(f"field {name!r}: value out of range for {t.base}")
-                        out.buf += arr.astype(dtype).tobytes()
-                return
-            for item in seq:
-                self._single(out, t, name, item)
-            return
-        self._single(out, t, name, value)
-
-    def _single(self, out: _Out, t: FieldType, name: str, value: Any) -> None:
-        if t.is_primitive:
-            _, size = PRIMITIVE_FORMATS[t.base]
-            out.align(size)
-            if t.base in ("float32", "float64"):
-                v: Any = 0.0 if value is None else float(value)
-            elif t.base == "bool":
-                v = bool(value)
-            else:
-                v = 0 if value is None else int(value)
-            out.buf += _PACK[t.base](v)
-        elif t.is_string:
-            if t.base == "wstring":
-                raise ValueError(f"field {name!r}: wstring is not supported")
-            data = ("" if value is None else str(value)).encode("utf-8")
-            if t.string_bound is not None and len(data) > t.string_bound:
-                raise ValueError(f"field {name!r} holds at most {t.string_bound} bytes")
-            out.align(4)
-            out.buf += _PACK_U32(len(data) + 1) + data + b"\x00"
-        else:
-            self._message(out, resolve_type(self.specs, t.base), value)
-
-
-_ENCODERS: dict[tuple[str, str | None], CdrEncoder] = {}
-
-
-def encoder_for(type_name: str, definition: str | None = None) -> CdrEncoder:
-    """A cached :class:`CdrEncoder` of ``type_name`` (definition found by :mod:`msgdefs` if None)."""
-    key = (type_name, definition)
-    enc = _ENCODERS.get(key)
-    if enc is None:
-        enc = _ENCODERS[key] = CdrEncoder(type_name, definition)
-    return enc
-
-
-def encode(type_name: str, msg: Any, definition: str | None = None) -> bytes:
-    """CDR bytes of one message ``msg`` of ``type_name`` (see :class:`CdrEncoder`)."""
-    return encoder_for(type_name, definition)(msg)
-
-
-_STAMP = struct.Struct("<iI").pack
-_F64 = struct.Struct("<d").pack
-
-
-def encode_sample_batch(stamp_ns: int, sample_period_s: float, voltage_kv: Any = (), stroke_mm: Any = (),
-                        true_stroke_mm: Any = (), elapsed_us: Any = (), frame_id: str = "") -> bytes:
-    """CDR bytes of a ``hasel_msgs/msg/SampleBatch``, fast (numpy arrays in, no per-value Python).
-
-    Parameters
-    ----------
-    stamp_ns : int
-        ``header.stamp``: time of sample 0, integer ns.
-    sample_period_s : float
-        Time between samples, s.
-    voltage_kv, stroke_mm, true_stroke_mm, elapsed_us : array_like
-        The four sample arrays (kV, mm, mm, us); empty when a signal is absent.
-    frame_id : str
-        ``header.frame_id``.
-
-    Returns
-    -------
-    bytes
-        Identical to :func:`encode` of the same message.
-    """
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    name = frame_id.encode("utf-8")
-    out = bytearray(ENCAPSULATION_LE)
-    out += _STAMP(sec, nanosec) + _PACK_U32(len(name) + 1) + name + b"\x00"
-    out += b"\x00" * ((-(len(out) - 4)) % 8)
-    out += _F64(float(sample_period_s))
-    for arr in (voltage_kv, stroke_mm, true_stroke_mm, elapsed_us):
-        a = np.asarray(arr, dtype="<f8").ravel()
-        out += b"\x00" * ((-(len(out) - 4)) % 4)
-        out += _PACK_U32(a.size)
-        if a.size:
-            out += b"\x00" * ((-(len(out) - 4)) % 8)
-            out += a.tobytes()
-    return bytes(out)

@@ -16,7 +16,7 @@ from pathlib import Path
 from hasel.errors import DataFileError
 from hasel.io.mcapfile import ChannelRecord, Damage, McapStream, SchemaRecord, read_summary
 from hasel.io.msgdefs import MessageDefinitionError, parse_schema
-from hasel.io.timeconv import NS_PER_S, ns_to_s
+from hasel.timeconv import ns_to_s, ns_to_stamp
 
 __all__ = ["TopicStats", "InfoReport", "info", "format_info", "format_size"]
 
@@ -184,7 +184,7 @@ def format_size(n: int) -> str:
 
 
 def _format_time(ns: int) -> str:
-    sec, rem = divmod(ns, NS_PER_S)
+    sec, rem = ns_to_stamp(ns)
     ms = rem // 1_000_000
     tm = time.localtime(sec)
     return f"{time.strftime('%b %e %Y %H:%M:%S', tm)}.{ms:03d} ({sec}.{ms:03d})"

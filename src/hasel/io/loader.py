@@ -26,8 +26,8 @@ import numpy as np
 from hasel.errors import BadInputError, DataFileError
 from hasel.io.cdr import CdrError, Extractor, FieldRequest, numeric_fields
 from hasel.io.mcapfile import ChannelRecord, McapStream, SchemaRecord, read_summary
-from hasel.io.msgdefs import MessageDefinitionError, MsgSpec, parse_schema, resolve_type, short_name
-from hasel.io.timeconv import NS_PER_S
+from hasel.io.msgdefs import PRIMITIVE_FORMATS, MessageDefinitionError, MsgSpec, parse_schema, resolve_type, short_name
+from hasel.timeconv import NS_PER_S, ns_to_s_array, stamp_to_ns
 
 __all__ = [
     "Signal", "TopicInfo", "Marker", "Segment", "MarkerSegment", "list_topics", "split_field_spec",
@@ -35,7 +35,6 @@ __all__ = [
 ]
 
 MARKER_TYPE = "hasel_msgs/ExperimentMarker"
-_NS = NS_PER_S
 _MARKER_FIELDS = ("label", "signal", "offset_kv", "amplitude_kv", "f0_hz", "f1_hz", "duration_s", "start")
 ProgressFn = Callable[[float], None]
 
@@ -216,7 +215,7 @@ class _Collector:
         pos = {p: i for i, p in enumerate(ex.paths)}
         self.scalar_cols = [(pos[f], f) for f in self.fields if self.kinds[f].kind in ("scalar", "element")]
         self.string_cols = [(pos[f], f) for f in self.fields if self.kinds[f].kind == "string"]
-        self.array_cols = [(pos[f], f, PRIMITIVE_SIZE[self.kinds[f].base]) for f in self.fields
+        self.array_cols = [(pos[f], f, PRIMITIVE_FORMATS[self.kinds[f].base][1]) for f in self.fields
                            if self.kinds[f].kind == "array"]
         self.times = array("q")
         self.log_times = array("q")
@@ -233,7 +232,7 @@ class _Collector:
         """The generated per-chunk loop and the bound ``append`` methods it feeds."""
         names: list[str] = ["T", "L"]
         sinks: list[Callable[[Any], Any]] = [self.times.append, self.log_times.append]
-        lines = ["T(v0 * 1000000000 + v1)" if self.header else "T(lt)", "L(lt)"]
+        lines = [f"T(v0 * {NS_PER_S} + v1)" if self.header else "T(lt)", "L(lt)"]  # stamp_to_ns, inlined
         if self.array_cols:
             names.append("P")
             sinks.append(self.periods.append)
@@ -285,7 +284,7 @@ class _Collector:
         pi = self.npre - 1
         for lt, _pt, _seq, s, e in items:
             r = ex(buf, s, e)  # raises CdrError on damage
-            self.times.append(r[0] * _NS + r[1] if self.header else lt)
+            self.times.append(stamp_to_ns(r[0], r[1]) if self.header else lt)
             self.log_times.append(lt)
             for j, f in self.scalar_cols:
                 self.scalars[f].append(r[j])
@@ -305,7 +304,7 @@ class _Collector:
         if self.header and t_ns.size and not t_ns.any():  # stamps never set: use the log times
             t_ns = np.frombuffer(self.log_times, dtype=np.int64)
             source = "log"
-        t_s = t_ns * (1.0 / _NS)
+        t_s = ns_to_s_array(t_ns)
         for _, f in self.scalar_cols:
             vals = np.array(self.scalars[f], dtype=float)
             out[f] = Signal(t_s.copy(), vals, self.topic, f, self.type_name, False, source)
@@ -335,10 +334,6 @@ def _unroll_times(stamp_s: np.ndarray, period_s: np.ndarray, counts: np.ndarray)
     starts = np.cumsum(counts) - counts
     k = np.arange(int(counts.sum())) - np.repeat(starts, counts)
     return np.repeat(stamp_s, counts) + k * np.repeat(period_s, counts)
-
-
-PRIMITIVE_SIZE = {"bool": 1, "byte": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2,
-                  "int32": 4, "uint32": 4, "int64": 8, "uint64": 8, "float32": 4, "float64": 8}
 
 
 def _short_or_none(name: str) -> str | None:
@@ -502,7 +497,7 @@ def load_signals(path: str | os.PathLike[str], fields: Sequence[str], *,
 def _markers_from(collectors: Sequence[_Collector]) -> list[Marker]:
     out: list[Marker] = []
     for col in collectors:
-        t = np.frombuffer(col.times, dtype=np.int64) * (1.0 / _NS) if len(col.times) else np.zeros(0)
+        t = ns_to_s_array(np.frombuffer(col.times, dtype=np.int64)) if len(col.times) else np.zeros(0)
         num = {f: col.scalars[f] for _, f in col.scalar_cols}
         for i in range(len(col.times)):
             out.append(Marker(float(t[i]), col.strings["label"][i], col.strings["signal"][i],

@@ -10,14 +10,20 @@ reason): in strict mode it raises :class:`~hasel.errors.DataFileError`, in toler
 mode (salvage, ``hasel info``) the stream skips the damaged record, looks for the next
 intact chunk and carries on.
 
+:func:`iter_messages` builds on the stream: the raw messages of a file in log-time
+order (what ``hasel replay`` publishes), with :func:`read_summary`'s chunk index
+bounding how many are held back.
+
 Format: https://mcap.dev/spec (records are opcode u8, length u64, body; little endian).
 """
 from __future__ import annotations
 
+import bisect
+import heapq
 import os
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -26,7 +32,7 @@ from hasel.errors import DataFileError
 
 __all__ = [
     "MAGIC", "Op", "OP_NAMES", "SchemaRecord", "ChannelRecord", "Damage", "MessageBlock", "McapStream",
-    "Summary", "read_summary", "MAX_RECORD_BYTES", "MAX_CHUNK_BYTES",
+    "Summary", "read_summary", "RawMessage", "iter_messages", "MAX_RECORD_BYTES", "MAX_CHUNK_BYTES",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -563,6 +569,8 @@ class Summary:
     message_end_time: int = 0
     chunk_count: int = 0
     has_statistics: bool = False
+    chunk_times: list[tuple[int, int, int]] = field(default_factory=list)
+    """``(chunk record's byte offset, first, last message log time in ns)`` per Chunk Index record."""
 
 
 def read_summary(path: str | os.PathLike[str]) -> Summary | None:
@@ -629,7 +637,82 @@ def read_summary(path: str | os.PathLike[str]) -> Summary | None:
                     cid = sub.u16()
                     out.channel_message_counts[cid] = sub.u64()
                 out.has_statistics = True
+            elif op == Op.CHUNK_INDEX:
+                b = _Body(buf, body, rend)
+                first, last, offset = b.u64(), b.u64(), b.u64()
+                out.chunk_times.append((offset, first, last))
             p = rend
     except (_Bad, struct.error):
         return None
     return out
+
+
+# --------------------------------------------------------------------------- messages
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One recorded message: ``topic``, ``type_name`` (``pkg/msg/Type``), CDR ``data``, log and publish time (ns)."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+
+
+def _type_name(schema: SchemaRecord | None) -> str:
+    name = schema.name if schema is not None else ""
+    return name.replace("/", "/msg/") if name.count("/") == 1 else name  # older rosbag2 naming pkg/Type
+
+
+def iter_messages(path: str | os.PathLike[str], topics: Sequence[str] | None = None) -> Iterator[RawMessage]:
+    """The messages of an MCAP file in log-time order (ties in file order), streamed.
+
+    The file is read once, chunk by chunk, in strict mode (damage raises). A message
+    is held back only while a chunk further on may still hold an earlier one: the
+    chunk index of the summary says when each chunk starts, so for files written in
+    time order (rosbag2, :class:`~hasel.io.writer.Ros2McapWriter`) at most one chunk
+    is held. Without a chunk index (no summary) every message is held and sorted at
+    the end.
+
+    Parameters
+    ----------
+    path : path-like
+        The MCAP file.
+    topics : sequence of str, optional
+        Only these topics (default: all).
+
+    Raises
+    ------
+    DataFileError
+        A missing, damaged or non-MCAP file (the message says where and suggests
+        ``hasel salvage``).
+    """
+    wanted = set(topics) if topics else None
+    summ = read_summary(path)
+    index = sorted(summ.chunk_times) if summ is not None else []
+    offsets = [o for o, _, _ in index]
+    # earliest start of the chunks from i on: nothing later in the file is older than this
+    later_start = [0] * (len(index) + 1)
+    later_start[-1] = 2**64
+    for i in range(len(index) - 1, -1, -1):
+        later_start[i] = min(index[i][1], later_start[i + 1])
+    stream = McapStream(path)
+    heap: list[tuple[int, int, int, RawMessage]] = []  # (log time, block offset, position): ties in file order
+    for block in stream:
+        for cid, items in block.messages.items():
+            ch = stream.channels.get(cid)
+            if ch is None:
+                raise DataFileError(f"{path}: message of unknown channel {cid} in the record at byte {block.offset}")
+            if wanted is not None and ch.topic not in wanted:
+                continue
+            name = _type_name(stream.schemas.get(ch.schema_id))
+            buf = block.buf
+            for lt, pt, _seq, start, end in items:
+                heapq.heappush(heap, (lt, block.offset, start, RawMessage(ch.topic, name, bytes(buf[start:end]), lt, pt)))
+        bound = later_start[bisect.bisect_right(offsets, block.offset)] if index else -1
+        while heap and heap[0][0] < bound:
+            yield heapq.heappop(heap)[3]
+    while heap:
+        yield heapq.heappop(heap)[3]

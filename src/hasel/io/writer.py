@@ -40,7 +40,7 @@ from hasel import __version__ as _hasel_version
 from hasel.errors import BadInputError
 from hasel.io.mcapfile import MAGIC, Op
 from hasel.io.msgdefs import full_name, message_definition, type_hash
-from hasel.io.timeconv import NS_PER_S, s_to_ns
+from hasel.timeconv import ns_to_stamp, s_to_ns
 
 __all__ = ["Ros2McapWriter", "QosProfile", "offered_qos_yaml", "DEFAULT_CHUNK_SIZE", "LIBRARY", "INFINITE_NS"]
 
@@ -88,7 +88,7 @@ def _duration(name: str, value: int | tuple[int, int] | None) -> tuple[int, int]
     ns = int(getattr(value, "nanoseconds", value))
     if ns < 0:
         raise BadInputError(f"QoS {name} must be >= 0 ns, got {ns}")
-    return divmod(ns, NS_PER_S)
+    return ns_to_stamp(ns)
 
 
 @dataclass(frozen=True)
