@@ -66,6 +66,7 @@ def _steps_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback", choices=["laser", "strain"], default="laser", help="feedback sensor (default laser)")
     p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
     p.add_argument("--calibration", default=None, help="strain-sensor calibration YAML (from hasel calibrate)")
+    p.add_argument("--gains", default=None, metavar="GAINS.yaml", help="controller gains (parameter file, hasel tune)")
     p.add_argument("--seed", type=seed, default=0, help="noise seed, 0 .. 2^31-1 (default 0)")
     p.add_argument("--record", metavar="FILE.mcap", default=None, help="record every topic to this MCAP file")
     p.add_argument("--json", metavar="FILE", default=None, help="write the step metrics as JSON")
@@ -125,6 +126,8 @@ COMMANDS: list[Command] = [
     Command("compare", "a measured closed-loop log against simulated plants: steps and NRMSE per plant",
             "hasel_sysid.compare:add_arguments", "hasel_sysid.compare:run", True,
             (Output("json"), Output("plot"))),
+    Command("tune", "design the dual-mode gains C+ and C- on a plant model (offline loop); writes a parameter file",
+            "hasel.tune:add_arguments", "hasel.tune:run", False, (Output("out"), Output("json")), ("start",)),
     Command("calibrate", "strain-sensor calibration against the laser (1 mm steps, 2-7 mm)",
             _calibrate_args, "hasel_sysid.calibrate:run", True, (Output("out"),)),
     Command("chirp", "the paper's identification experiment (chirps on DC offsets), recorded to MCAP",
