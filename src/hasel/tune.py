@@ -136,8 +136,8 @@ def read_gains(path: str | Path) -> dict[str, float]:
 
     The file holds ``NODE: {ros__parameters: {...}}`` with NODE ``pid_controller``,
     ``/pid_controller`` or ``/**``; the parameters are any of :data:`GAIN_KEYS` (others
-    keep the paper's value). Anything else (another key, a non-numeric or negative gain,
-    a gain beyond the node's range) raises :class:`BadInputError` with one line.
+    keep the paper's value). Anything the node would refuse (another key, an integer or
+    non-numeric or negative gain, a gain beyond the node's range) raises :class:`BadInputError` with one line.
     """
     import yaml
 
@@ -153,10 +153,13 @@ def read_gains(path: str | Path) -> dict[str, float]:
         mark = getattr(err, "problem_mark", None)
         at = f" at line {mark.line + 1}" if mark is not None else ""
         raise BadInputError(f"{where}: not valid YAML{at}") from None
+    node, body = next(iter(doc.items())) if isinstance(doc, dict) and doc else (None, None)
+    if isinstance(doc, dict) and set(doc) & set(GAIN_KEYS):
+        raise BadInputError(f"{where}: the gains must sit under '{NODE_NAME}:' and 'ros__parameters:' "
+                            "(a ROS 2 parameter file)")
     if not isinstance(doc, dict) or len(doc) != 1:
         raise BadInputError(f"{where}: expected one node entry, e.g. '{NODE_NAME}: {{ros__parameters: "
                             f"{{kp_plus: 1.15, ...}}}}'")
-    node, body = next(iter(doc.items()))
     if node not in (NODE_NAME, "/" + NODE_NAME, "/**"):
         raise BadInputError(f"{where}: node {node!r} is not {NODE_NAME}, /{NODE_NAME} or /**")
     if not isinstance(body, dict) or set(body) != {"ros__parameters"} or not isinstance(body["ros__parameters"], dict):
@@ -166,12 +169,16 @@ def read_gains(path: str | Path) -> dict[str, float]:
     for key, value in params.items():
         if key not in GAIN_KEYS:
             raise BadInputError(f"{where}: unknown parameter {key!r}; the gains are {', '.join(GAIN_KEYS)}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if isinstance(value, int) and not isinstance(value, bool):
+            # the node declares doubles and refuses an integer: say so now, not at its start
+            raise BadInputError(f"{where}: {key} must be written as a float ({value}.0): pid_controller refuses "
+                                "an integer for a double parameter")
+        if not isinstance(value, float) or not math.isfinite(value):
             raise BadInputError(f"{where}: {key} must be a finite number, got {value!r}")
         if not GAIN_RANGE[0] <= value <= GAIN_RANGE[1]:
             raise BadInputError(f"{where}: {key} = {value} is outside the node's range {GAIN_RANGE[0]:g} .. "
                                 f"{GAIN_RANGE[1]:g}")
-        out[key] = float(value)  # the node declares doubles: an integer would be refused there
+        out[key] = value
     if not out:
         raise BadInputError(f"{where}: no gain under ros__parameters")
     return out
