@@ -401,7 +401,7 @@ def tune(make_plant: Callable[[], object], *, start: dict[str, float] | None = N
 
 def _no_worse(e: Evaluation, ref: Evaluation, settle_tol_s: float = 0.002, over_tol_pct: float = 0.2) -> bool:
     """True if no step of ``e`` settles later or overshoots more than the same step of ``ref``
-    (beyond a sample's worth of tolerance); a step ``ref`` never settled is free."""
+    (beyond ``settle_tol_s`` s and ``over_tol_pct`` %); a step ``ref`` never settled is free."""
     for a, b in zip(e.steps, ref.steps):
         if not math.isfinite(b.settling_s):
             continue
