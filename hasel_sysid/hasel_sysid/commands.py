@@ -26,6 +26,7 @@ def _steps_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback", choices=["laser", "strain"], default="laser", help="feedback sensor (default laser)")
     p.add_argument("--plant", default="nominal", help="plant variant (default nominal)")
     p.add_argument("--calibration", default=None, help="strain-sensor calibration YAML (from hasel calibrate)")
+    p.add_argument("--gains", default=None, metavar="GAINS.yaml", help="controller gains (parameter file, hasel tune)")
     p.add_argument("--seed", type=seed, default=0, help="noise seed, 0 .. 2^31-1 (default 0)")
     p.add_argument("--record", metavar="FILE.mcap", default=None, help="record every topic to this MCAP file")
     p.add_argument("--json", metavar="FILE", default=None, help="write the step metrics as JSON")

@@ -18,6 +18,7 @@ from hasel.compare import (DEFAULTS, ClosedLoopLog, load_closed_loop, measured_s
                            reference_steps)
 from hasel.errors import BadInputError
 from hasel.outputs import replacing, write_text
+from hasel.tune import PAPER_GAINS, read_gains
 
 __all__ = ["add_arguments", "run", "compare"]
 
@@ -29,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="nominal | truth | truth:EFFECT(p=v)+... | a plant-model file; repeat for more")
     p.add_argument("--feedback", choices=["laser", "strain"], default="laser", help="feedback sensor (default laser)")
     p.add_argument("--seed", type=int, default=0, help="noise seed of the simulated sensors (default 0)")
+    p.add_argument("--gains", default=None, metavar="GAINS.yaml",
+                   help="controller gains of the replay (parameter file, hasel tune; default the paper's)")
     p.add_argument("--time", metavar="COL", default=None, help="CSV time column, s (default t_s)")
     p.add_argument("--reference", metavar="COL|/topic.field", default=None,
                    help=f"reference, mm (default {DEFAULTS['reference'][1]} or {DEFAULTS['reference'][0]})")
@@ -41,17 +44,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def compare(log: ClosedLoopLog, plants: list[str], *, feedback: str = "laser", seed: int = 0,
-            quiet: bool = True) -> dict:
-    """The comparison of ``log`` with each plant (JSON-ready, plus ``"_signals"`` for plots)."""
+            quiet: bool = True, gains: dict[str, float] | None = None) -> dict:
+    """The comparison of ``log`` with each plant (JSON-ready, plus ``"_signals"`` for plots).
+
+    ``gains``: the controller's gain parameters for the replay (the paper's by default);
+    they should be the gains the log was measured with.
+    """
     from hasel_sysid.steps import run_steps
 
     seq, hold, t0 = reference_steps(log)
     duration = hold * len(seq)
     out: dict = {"log": log.source, "sequence_mm": seq, "hold_s": hold, "feedback": feedback, "seed": seed,
+                 "gains": {**PAPER_GAINS, **(gains or {})},
                  "measured": {"steps": [m.to_json() for m in measured_steps(log, seq, hold, t0)]},
                  "plants": [], "_signals": {"measured": (log.t_s - t0, log.stroke_mm, log.voltage_kv)}}
     for plant in plants:
-        res = run_steps(feedback, seq, hold, seed=seed, plant=plant, quiet=quiet)
+        res = run_steps(feedback, seq, hold, seed=seed, plant=plant, quiet=quiet, gains=gains)
         s = res["_signals"]
         sel, y_sim = on_log_times(log, t0, duration, s["t_s"], s["true_stroke_mm"])
         _, v_sim = on_log_times(log, t0, duration, s["t_s"], s["voltage_kv"])
@@ -125,9 +133,10 @@ def run(args: argparse.Namespace) -> int:
         plants.append(plant)
     if not 0 <= args.seed < 2**31:
         raise BadInputError(f"--seed must be within 0 .. 2^31-1, got {args.seed}")
+    gains = read_gains(args.gains) if args.gains else None
     log = load_closed_loop(args.log, time=args.time, reference=args.reference, stroke=args.stroke,
                            voltage=args.voltage)
-    res = compare(log, plants, feedback=args.feedback, seed=args.seed)
+    res = compare(log, plants, feedback=args.feedback, seed=args.seed, gains=gains)
     print(format_table(res))
     if args.json:
         write_text(args.json, json.dumps({k: v for k, v in res.items() if k != "_signals"}, indent=2) + "\n")

@@ -19,20 +19,25 @@ from hasel import paper
 from hasel.errors import BadInputError
 from hasel.metrics import steps_from_sequence
 from hasel.outputs import replacing, write_text
+from hasel.tune import PAPER_GAINS, read_gains
 
 __all__ = ["run", "run_steps", "format_table"]
 
 
 def run_steps(feedback: str, sequence: list[float], hold_s: float, *, seed: int = 0, plant: str = "nominal",
               calibration_file: str = "", record: str | None = None, quiet: bool = False,
-              actuator=None) -> dict:
-    """Run the step test; return the JSON dict plus the signals under ``"_signals"``."""
+              actuator=None, gains: dict[str, float] | None = None) -> dict:
+    """Run the step test; return the JSON dict plus the signals under ``"_signals"``.
+
+    ``gains``: controller gain parameters (``kp_plus`` ... ``kd_minus``, as
+    :func:`hasel.tune.read_gains` returns them); the paper's by default.
+    """
     from hasel_sysid.graph import GraphConfig, NodeGraph
     from hasel_sysid.progress import Progress
 
     duration = hold_s * len(sequence)
     cfg = GraphConfig(feedback=feedback, sequence_mm=sequence, hold_s=hold_s, seed=seed, variant=plant,
-                      calibration_file=calibration_file, actuator=actuator)
+                      calibration_file=calibration_file, actuator=actuator, controller_params=dict(gains or {}))
     extra = []
     if record:
         from hasel_sysid.recording import recorder_factory
@@ -54,6 +59,7 @@ def run_steps(feedback: str, sequence: list[float], hold_s: float, *, seed: int 
         "max_applied_kv": float(kv.max()) if kv.size else 0.0,
         "min_applied_kv": float(kv.min()) if kv.size else 0.0,
         "feedback": feedback, "sequence_mm": sequence, "hold_s": hold_s, "plant": plant, "seed": seed,
+        "gains": {**PAPER_GAINS, **(gains or {})},
         "units": {"rise_s": "s", "settling_s": "s", "overshoot_pct": "%", "applied": "kV"},
         "_signals": {**s, "applied_tick": applied, "filtered": filtered},
     }
@@ -127,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
         raise BadInputError(f"--hold must be between 0.05 and 3600 s, got {args.hold}")
     if args.calibration and not Path(args.calibration).is_file():
         raise BadInputError(f"--calibration file not found: {args.calibration}")
+    gains = read_gains(args.gains) if getattr(args, "gains", None) else None
     from sim_plant.plant_node import make_actuator
 
     from hasel.plantfile import looks_like_path
@@ -143,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
                          f"reaches at the {paper.V_MAX_KV:g} kV ceiling; the loop will saturate at "
                          f"{paper.V_MAX_KV:g} kV there\n")
     res = run_steps(args.feedback, seq, args.hold, seed=args.seed, plant=args.plant,
-                    calibration_file=args.calibration or "", record=args.record)
+                    calibration_file=args.calibration or "", record=args.record, gains=gains)
     print(format_table(res["steps"], args.feedback))
     print(f"applied voltage: {res['min_applied_kv']:.3f} .. {res['max_applied_kv']:.3f} kV (ceiling 9 kV)")
     if args.json:

@@ -92,6 +92,8 @@ def run_env(args: argparse.Namespace) -> int:
 COMMANDS: list[Command] = [
     Command("env", "run a command in the workspace's ROS environment: hasel env -- CMD",
             _env_args, "hasel.cli:run_env", True),
+    Command("tune", "design the dual-mode gains C+ and C- on a plant model (offline loop); writes a parameter file",
+            "hasel.tune:add_arguments", "hasel.tune:run", False, (Output("out"), Output("json")), ("start",)),
     Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
             "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False,
             (Output("json"), Output("plot"), Output("report", "report.md"))),
