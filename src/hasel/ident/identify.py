@@ -111,7 +111,14 @@ class IdentOptions:
         Budget of the output-error refinement per candidate order.
     min_compare_fit_pct : float
         Held-out compare fit below which the model is not usable (see
-        :mod:`hasel.ident.checks`).
+        :mod:`hasel.ident.checks`), after the part of the error the measurement
+        noise explains is taken out.
+    max_timing_samples : float
+        Largest timing offset between the input and output samples estimated
+        alongside the model, raw samples (0: none). Loggers differ by up to about a
+        sample (input held or interpolated, output read at the start or the middle of
+        a sample, a skew between channels); estimated, it is reported as
+        ``timing_offset_s`` instead of bending ``G(s)``'s phase.
     """
 
     band_hz: tuple[float, float] | None = None
@@ -134,6 +141,7 @@ class IdentOptions:
     input_hold: str = "zoh"
     oe_max_nfev: int = 40
     min_compare_fit_pct: float = 80.0
+    max_timing_samples: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -237,6 +245,13 @@ class IdentResult:
         Remarks (resampling, estimator choice, loader notes).
     timings_s : dict of str to float
         Wall time per stage, s.
+    check : ModelCheck or None
+        The model's own checks (:mod:`hasel.ident.checks`).
+    static_slope_ci : float or None
+        Standard error of the static map's slope, output/input unit.
+    timing_offset_s : float
+        Timing offset of the output samples against the input samples estimated with
+        the model, s (late > 0); not part of ``G(s)``.
     """
 
     points: list[OperatingPoint]
@@ -260,6 +275,7 @@ class IdentResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     check: ModelCheck | None = None
     static_slope_ci: float | None = None
+    timing_offset_s: float = 0.0
 
     @property
     def usable(self) -> bool:
@@ -288,7 +304,9 @@ class IdentResult:
             f"operating points: {len(self.points)} "
             f"({', '.join(f'{p.mean_input:.3g}' for p in self.points)}{(' ' + self.input_unit) if self.input_unit else ''})",
             f"model order: {self.fit.nz} zeros / {self.fit.np} poles"
-            + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else ""),
+            + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else "")
+            + (f"; timing offset of the output samples {self.timing_offset_s * 1e3:+.3g} ms (sampling "
+               "convention, not part of G(s))" if abs(self.timing_offset_s) * self.rate_hz >= 0.05 else ""),
             f"static gain G(0): {m.dc_gain:.4g} {self.gain_unit}; " + (
                 f"static map slope at the mean offset: "
                 f"{float(self.static_map.slope(np.mean(self.static_map.offsets))):.4g} {self.gain_unit} "
@@ -320,7 +338,7 @@ class IdentResult:
     def to_model_json(self) -> dict[str, Any]:
         """MODEL.json: ``{"num": [...], "den": [...]}`` (descending powers of s) and more keys.
 
-        Extra keys: ``delay_s``, ``zeros``/``poles`` (``[re, im]`` pairs, rad/s),
+        Extra keys: ``delay_s``, ``timing_offset_s`` (output samples late against the input, s; not in ``G``), ``zeros``/``poles`` (``[re, im]`` pairs, rad/s),
         ``gain`` (zero-pole-gain ``k``), ``static_gain`` (``G(0)``), ``order``,
         ``units``, ``signals``, ``frequency_band_hz``, ``fit`` (quality and the order
         scores), ``static_map``, ``operating_points``, ``offset_dependence``,
@@ -343,6 +361,7 @@ class IdentResult:
             "num": [float(c) for c in m.num],
             "den": [float(c) for c in m.den],
             "delay_s": float(m.delay_s),
+            "timing_offset_s": float(self.timing_offset_s),
             "zeros": pairs(m.zeros),
             "poles": pairs(m.poles),
             "gain": float(m.gain),
@@ -640,7 +659,8 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
     if num[-1] != 0:
         num = num * g_old / num[-1]   # keep G(0)
     m = TFModel(num, oe.model.den)
-    oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev)
+    oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
+                 max_shift=max(float(opts.max_timing_samples), 0.0) / block, shift0=oe.shift)
     z2 = oe2.model.zeros
     f2 = np.abs(z2) / (2 * np.pi)
     still = np.any((np.real(z2) > 0) & ((f2 < band[0] / 2) | (f2 > 2 * band[1])))
@@ -844,6 +864,8 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
                      "output-error fit and of the validation")
     if not np.any(pieces.estimate):
         raise BadInputError("the log is too short: nothing left to estimate from after the settling time")
+    # the timing offset between the channels, bounded to max_timing_samples raw samples (working samples here)
+    max_shift = max(float(opts.max_timing_samples), 0.0) / oe_block
     candidates = []
     n_ps = [int(opts.order[1])] if opts.order is not None else list(range(1, opts.max_poles + 1))
     best, stale = np.inf, 0
@@ -860,12 +882,12 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             starts.append(arx)
         if not starts:
             continue
-        pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0)
-               for m in starts]
+        pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0,
+                      max_shift=max_shift) for m in starts]
         pre_cost = np.array([p.nrmse_estimate for p in pre], float)
         best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
         oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
-                    max_nfev=opts.oe_max_nfev)
+                    max_nfev=opts.oe_max_nfev, max_shift=max_shift)
         score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
         # the starts themselves compete too (a refinement that does not generalise loses on held-out data)
         for pr in pre:
@@ -940,4 +962,5 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
                        static_map=smap, fit=fit, dependence=dep,
                        validation=validation, band_hz=band, rate_hz=rate, analysis_rate_hz=fs,
                        input_name=input_name, output_name=output_name, input_unit=in_unit, output_unit=out_unit,
-                       options=opts, notes=notes, timings_s=timings, check=check, static_slope_ci=static_ci)
+                       options=opts, notes=notes, timings_s=timings, check=check, static_slope_ci=static_ci,
+                       timing_offset_s=float(oe.shift) / oe_rate)
