@@ -94,8 +94,10 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
         Raw samples averaged into each sample of ``u`` and of the data compared with
         (1 for raw data).
     shift : float
-        Timing offset of the data's output samples, in samples of ``u`` (late > 0):
-        the simulation is read that much later (linear interpolation).
+        Where the data's output samples sit on the simulation's time axis, in samples
+        of ``u``: ``y_data[k] = y_sim(k + shift)`` (linear interpolation). Positive
+        when the data's output is ahead of the model (a first-order hold of the
+        input), negative when it lags (a skew of the output channel).
 
     Returns
     -------
@@ -203,8 +205,8 @@ class OEResult:
     y_hat : ndarray
         The simulation over the whole log.
     shift : float
-        Estimated timing offset of the output samples, samples of the data (late > 0;
-        0 when not estimated).
+        Estimated timing offset, samples of the data, as :func:`simulate_zoh`'s
+        ``shift`` (0 when not estimated).
     """
 
     model: TFModel
