@@ -254,7 +254,7 @@ def _from_theta(theta: np.ndarray, nz: int, n_p: int, w0: float) -> TFModel:
 
 def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *, hold: str = "zoh",
            block: int = 1, max_nfev: int = 60, log_pmin: float | None = None, max_shift: float = 0.0,
-           shift0: float = 0.0) -> OEResult:
+           shift0: float = 0.0, offset: float = 0.0) -> OEResult:
     """Refine ``model0`` (same orders) by output error on ``pieces.estimate``; score on ``pieces.heldout``.
 
     Parameters
@@ -277,6 +277,9 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
         Largest timing offset estimated, samples of ``u`` (0: none estimated).
     shift0 : float
         Start of the timing offset, samples (within ``max_shift``).
+    offset : float
+        A fixed timing offset added to the estimated one, samples (as
+        :func:`simulate_zoh`'s ``shift``).
 
     Returns
     -------
@@ -303,8 +306,11 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     def shift_of(theta: np.ndarray) -> float:
         return float(max_shift * np.tanh(theta[n_th])) if max_shift > 0 else 0.0
 
+    def total_shift(theta: np.ndarray) -> float:
+        return offset + shift_of(theta)
+
     def sim(theta: np.ndarray) -> tuple[np.ndarray, list[float]]:
-        sh = shift_of(theta)
+        sh = total_shift(theta)
         th = theta[:n_th]
         if lo_bound is not None:
             th = th.copy()
