@@ -26,7 +26,9 @@ A model is usable when all of these hold:
    more than ``INBAND_MAX_SHARE`` of the points, or a run of them spanning more than
    an octave, make the model unusable (a good time-domain score can hide a
    model that is wrong over part of the band). Only points whose estimate has a
-   coherence of at least ``INBAND_MIN_COHERENCE`` are judged.
+   coherence of at least ``INBAND_MIN_COHERENCE`` are judged. :func:`~hasel.ident.identify`
+   runs it on leakage-free estimates only (whole periods of a periodic input), whose
+   error bars hold.
 
 Each failure comes with the experiment that would fix it.
 """

@@ -1059,7 +1059,12 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     check = check_model(model, band_hz=band, static_slope=slope0 if informative else None,
                         static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
                         min_compare_fit_pct=opts.min_compare_fit_pct, rhp_zeros_shown=rhp_shown,
-                        noise_floor=floor, measured=fit_data, timing_offset_s=-float(oe.shift) / oe_rate)
+                        noise_floor=floor, measured=fit_data if fr.periodic else None,
+                        timing_offset_s=-float(oe.shift) / oe_rate)
+    if not fr.periodic:
+        notes.append("the model was not checked against the measured frequency response in the band: a "
+                     "non-periodic input's Welch estimate carries a leakage and transient bias that its error "
+                     "bars do not hold (repeat the excitation, whole periods per operating point, for that check)")
     lap("validation")
     return IdentResult(points=points, skipped=skipped, pooled=pooled, fit_data=fit_data, estimator=fr.estimator,
                        static_map=smap, fit=fit, dependence=dep,
