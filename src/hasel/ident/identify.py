@@ -492,6 +492,16 @@ def _refine_period(u: np.ndarray, approx_samples: float) -> float:
     return float(best_k)
 
 
+def _repeats(x: np.ndarray, n: int, tol: float = 0.05) -> bool:
+    """True if ``x`` repeats itself every ``n`` samples: the rms change from one period to the next is at most
+    ``tol`` of its rms about the mean (a correlated but different pattern, such as a staircase whose second half
+    has other levels, is not periodic: an FFT over its "periods" would not be leakage-free)."""
+    if n <= 0 or x.size < 2 * n:
+        return False
+    d = x[n:] - x[:-n]
+    return float(np.sqrt(np.mean(d * d))) <= tol * float(np.std(x))
+
+
 def _clipped_fraction(y: np.ndarray) -> tuple[float, float]:
     """Largest fraction of samples sitting exactly at the maximum or the minimum, and that value."""
     hi, lo = float(np.max(y)), float(np.min(y))
@@ -578,7 +588,7 @@ def _frequency_responses(segs: list[Segment], t: np.ndarray, uu: np.ndarray, yy:
         means.append((float(np.mean(ud[ud.size // 2:])), float(np.mean(yd[yd.size // 2:]))))
     n_per = [None if p is None else int(round(p * rate)) for p in periods]
     periodic = all(n is not None and 2 * n <= ud.size * M for n, (ud, _) in zip(n_per, dec)) and \
-        len(set(n_per)) == 1
+        len(set(n_per)) == 1 and all(_repeats(uu[s.i0:s.i1], n_per[0]) for s in segs)
     ffts: list[FreqResp] = []
     for s, (ud, _), p in zip(segs, dec, periods):
         n_raw = ud.size * M
