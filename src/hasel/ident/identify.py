@@ -765,7 +765,9 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
         num = num * g_old / num[-1]   # keep G(0)
     m = TFModel(num, oe.model.den)
     oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
-                 max_shift=max(float(opts.max_timing_samples), 0.0) / block, shift0=oe.shift)
+                 # the timing choice stands: estimated again only if it was kept
+                 max_shift=max(float(opts.max_timing_samples), 0.0) / block if oe.shift != 0.0 else 0.0,
+                 shift0=oe.shift)
     z2 = oe2.model.zeros
     f2 = np.abs(z2) / (2 * np.pi)
     still = np.any((np.real(z2) > 0) & ((f2 < band[0] / 2) | (f2 > 2 * band[1])))
@@ -1011,11 +1013,12 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")
     ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12] or candidates
     nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
-    oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     floor, floor_how = (_noise_floor(yy, segs, fr, oe_block, yd_all, oe.y_hat, pieces, band, oe_rate)
                         if hold > 0 else (None, ""))
     if max_shift > 0 and hold > 0 and math.isfinite(oe.nrmse_heldout):
         oe = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data, band, notes)
+    # after the timing choice: a refit without the offset may bring back a far right-half-plane zero
+    oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)
     scores = [OrderScore(c[0], c[1], float(c[3].nrmse_estimate), float(c[4])) for c in candidates]
     try:

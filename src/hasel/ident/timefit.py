@@ -335,7 +335,8 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
         with np.errstate(all="ignore"):
             try:
                 yh, _ = sim(clip(theta))
-            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, StopIteration):
+                # StopIteration: hasel.lti's pairing of (nearly) repeated poles gives up on a diverged set
                 return np.full(int(np.count_nonzero(est)), 1e3)
         r = (y[est] - yh[est]) / scale
         return np.where(np.isfinite(r), r, 1e3)
@@ -344,8 +345,11 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     theta = theta0 if max_nfev <= 0 else _levenberg_marquardt(resid, theta0, r0, max_iter=max(1, max_nfev // 3))
     theta = clip(theta)
     with np.errstate(all="ignore"):   # a diverged start is scored (as NaN), not warned about
-        yh, levels = sim(theta)
         model = _from_theta(theta[:n_th], nz, n_p, w0)
+        try:
+            yh, levels = sim(theta)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, StopIteration):
+            yh, levels = np.full(y.shape, np.nan), [float("nan")] * len(pieces.bounds)
     return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh,
                     shift_of(theta))
 
