@@ -118,7 +118,10 @@ class IdentOptions:
         alongside the model, raw samples (0: none). Loggers differ by up to about a
         sample (input held or interpolated, output read at the start or the middle of
         a sample, a skew between channels); estimated, it is reported as
-        ``timing_offset_s`` instead of bending ``G(s)``'s phase.
+        ``timing_offset_s`` instead of bending ``G(s)``'s phase. Off by default (the
+        zero-order-hold convention): on noise-free or weakly exciting logs the extra
+        freedom let the order selection over-fit (a spurious slow pole pair); 1 for
+        logs of unknown convention.
     """
 
     band_hz: tuple[float, float] | None = None
@@ -141,7 +144,7 @@ class IdentOptions:
     input_hold: str = "zoh"
     oe_max_nfev: int = 40
     min_compare_fit_pct: float = 80.0
-    max_timing_samples: float = 1.0
+    max_timing_samples: float = 0.0
 
 
 @dataclass(frozen=True)
