@@ -22,6 +22,15 @@ Designs (:data:`DESIGNS`), each on offsets 2..7 kV unless said otherwise:
   2 -> 4 -> 6 -> 4 -> 2 mm, 2 s each, three times; the log holds the applied voltage.
 
 ``precondition=True`` puts 1 s at -1 kV (then 0.2 s at 0 kV) before each offset.
+
+Measurement knobs of :func:`make_log` (all off by default): the sampling ``convention``
+(``"zoh"``: input held over each sample; ``"foh"``: input linearly interpolated between
+samples; ``"centred"``: output read mid-sample), a fractional ``offset_samples`` between
+input and output samples (output late > 0), the ``noise_kind`` (``"white"``,
+``"coloured"``: white through a first-order low-pass at ``noise_fc_hz``, ``"wander"``:
+white plus a slow offset drift of 4 x its rms), ``lsb_mm`` (quantisation of the stroke)
+and ``amplitude`` (a factor on every excitation). Other conventions than a plain ZOH
+are simulated on a grid 8 times finer.
 """
 from __future__ import annotations
 
@@ -106,9 +115,45 @@ def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator) -> np
     raise ValueError(kind)
 
 
+def _fine(u: np.ndarray, rate_hz: float, convention: str, offset_samples: float, m: int = 8) -> np.ndarray:
+    """Stroke of P(s) for ``u`` under a sampling ``convention`` and timing offset (simulated at ``m x rate_hz``)."""
+    m = max(2, min(m, int(40000.0 // rate_hz)))
+    fine = np.repeat(u, m) if convention in ("zoh", "centred") else np.interp(np.arange(u.size * m) / m,
+                                                                                np.arange(u.size), u)
+    # hasel.lti's exact ZOH sections (the state-space path of scipy loses digits on the double pole pair)
+    from hasel.lti import zoh_sos
+
+    num, den = paper.plant_tf()
+    sos = zoh_sos(num, den, 1.0 / (rate_hz * m), output="start")
+    yf, _ = signal.sosfilt(sos, fine, zi=signal.sosfilt_zi(sos) * fine[0])
+    shift = (m // 2 if convention == "centred" else 0) - int(round(offset_samples * m))
+    return yf[np.clip(np.arange(u.size) * m + shift, 0, yf.size - 1)]
+
+
+def _noise(rng: np.random.Generator, n: int, rate_hz: float, sd: float, kind: str, fc_hz: float) -> np.ndarray:
+    """Measurement noise of rms ``sd`` (mm) of ``kind`` (see the module)."""
+    w = rng.standard_normal(n)
+    if kind == "white":
+        return sd * w
+    if kind == "coloured":
+        a = np.exp(-2 * np.pi * fc_hz / rate_hz)
+        x = signal.lfilter([1.0 - a], [1.0, -a], w)
+        return sd * x / x.std()
+    if kind == "wander":
+        a = np.exp(-1.0 / (10.0 * rate_hz))
+        d = signal.detrend(signal.lfilter([1.0], [1.0, -a], rng.standard_normal(n)), type="constant")
+        return sd * w + 4.0 * sd * d / max(float(np.abs(d).max()), 1e-12)
+    raise ValueError(kind)
+
+
 def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, precondition: bool = False,
-             settle_s: float = 0.5, noise_mm: float = 0.01, offsets_kv=OFFSETS_KV) -> Log:
-    """One effect-free log of ``design`` (see the module) at ``rate_hz``, white noise ``noise_mm`` (mm RMS)."""
+             settle_s: float = 0.5, noise_mm: float = 0.01, offsets_kv=OFFSETS_KV, convention: str = "zoh",
+             offset_samples: float = 0.0, noise_kind: str = "white", noise_fc_hz: float = 5.0,
+             lsb_mm: float = 0.0, amplitude: float = 1.0) -> Log:
+    """One effect-free log of ``design`` (see the module) at ``rate_hz``, noise ``noise_mm`` (mm RMS).
+
+    The measurement knobs (``convention`` ... ``amplitude``) are described in the module.
+    """
     rng = np.random.default_rng(seed)
     if design == "closed_loop":
         return _closed_loop(rate_hz, rng, noise_mm)
@@ -125,15 +170,24 @@ def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, preconditio
                 parts.append(np.zeros(int(round(0.2 * rate_hz))))
             parts.append(np.full(int(round(settle_s * rate_hz)), off))
             n0 = sum(p.size for p in parts)
-            x = off + _chirp_per_offset(design, rate_hz, rng)
+            x = off + amplitude * _chirp_per_offset(design, rate_hz, rng)
             parts.append(x)
             marks.append((n0 / rate_hz, (n0 + x.size) / rate_hz, off))
         parts.append(np.zeros(int(round(0.5 * rate_hz))))
     u = np.concatenate(parts)
-    y = _simulate(u, rate_hz) + noise_mm * rng.standard_normal(u.size)
+    plain = convention == "zoh" and offset_samples == 0.0 and noise_kind == "white" and lsb_mm == 0.0
+    if plain:   # the original generator, draw for draw
+        y = _simulate(u, rate_hz) + noise_mm * rng.standard_normal(u.size)
+    else:
+        y = _fine(u, rate_hz, convention, offset_samples) + _noise(rng, u.size, rate_hz, noise_mm, noise_kind,
+                                                                   noise_fc_hz)
+        if lsb_mm > 0:
+            y = np.round(y / lsb_mm) * lsb_mm
     t = np.arange(u.size) / rate_hz
     return Log(t, u, y, design, rate_hz, {"excitation_segments": marks, "precondition": precondition,
-                                          "settle_s": settle_s, "noise_mm": noise_mm, "seed": seed})
+                                          "settle_s": settle_s, "noise_mm": noise_mm, "seed": seed,
+                                          "convention": convention, "offset_samples": offset_samples,
+                                          "noise_kind": noise_kind, "lsb_mm": lsb_mm, "amplitude": amplitude})
 
 
 def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float) -> Log:

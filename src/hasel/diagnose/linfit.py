@@ -238,7 +238,14 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
         Descending powers of s.
     info : dict
         ``{"order", "nrmse_train", "orders": {n: nrmse}}``.
+
+    Raises
+    ------
+    BadInputError
+        When no order gives a model, or there are no training samples (one line saying so).
     """
+    if not any(r.train.any() for r in prep.records):
+        raise BadInputError("no training samples to identify a linear model from")
     y = np.concatenate([r.y[r.train] for r in prep.records])
     fits = {}  # nrmse here is with the best offset (the model's own scale of error)
     for n in (orders or range(1, max_order + 1)):
@@ -251,12 +258,14 @@ def fit_linear(prep: Prepared, max_order: int = 4, orders: tuple[int, ...] | Non
             continue
         fits[n] = (num, den, float(np.sqrt(sse) / np.linalg.norm(y - y.mean())))
     if not fits:
-        raise ValueError("no linear model could be fitted")
+        raise BadInputError("no linear model could be fitted to the log (try a longer log or a richer "
+                            "excitation, or give a nominal model)")
     best = min(f[2] for f in fits.values())
     order = min(n for n, f in fits.items() if f[2] <= 1.03 * best + 1e-12)
     num, den, e = fits[order]
     if not np.isfinite(e):
-        raise ValueError("no stable minimum-phase linear model could be fitted")
+        raise BadInputError("no stable minimum-phase linear model could be fitted to the log (give a nominal "
+                            "model)")
     return num, den, {"order": order, "nrmse_train": e, "orders": {n: f[2] for n, f in fits.items()},
                       "method": "internal output-error fit"}
 

@@ -37,6 +37,7 @@ import numpy as np
 from scipy import signal, stats
 
 from hasel.errors import BadInputError
+from hasel.ident.freqresp import excited_band
 from hasel.lti import zoh_sos
 from hasel.metrics import nrmse
 from hasel.signals import uniform_grid
@@ -138,19 +139,18 @@ def _uniform(t: np.ndarray, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, n
     return t, u, y, 1.0 / step
 
 
-def excited_band_hz(u: np.ndarray, rate_hz: float, rel_level: float = 1e-4) -> float:
-    """Highest frequency (Hz) where the input's spectrum is within ``rel_level`` of its peak.
+def excited_band_hz(u: np.ndarray, rate_hz: float, rel_level: float = 3e-5) -> float:
+    """Top of the input's excited band, Hz: :func:`hasel.ident.freqresp.excited_band` (the one definition).
 
-    The input is detrended and its Welch spectrum (Hann, about 16 averages) is
-    compared with its largest value: ``1e-4`` is -40 dB.
+    On the linearly detrended input (a staircase of offsets would otherwise set the
+    reference level) at ``rel_level = 3e-5`` (-45 dB of the 1/8-octave smoothed
+    periodogram, not identify's -20 dB): the working rate is chosen from it and must
+    carry everything the input holds, not only its main band.
     """
-    x = signal.detrend(np.asarray(u, float))
-    if not np.any(x):
+    try:
+        return excited_band(signal.detrend(np.asarray(u, float)), rate_hz, rel_level=rel_level)[1]
+    except BadInputError:   # a constant input: nothing bounds the band
         return rate_hz / 2
-    nper = int(min(x.size, max(256, 2 ** int(np.ceil(np.log2(max(x.size / 8, 2)))))))
-    f, p = signal.welch(x, fs=rate_hz, nperseg=nper)
-    above = np.flatnonzero(p >= rel_level * p.max())
-    return float(f[above[-1]]) if above.size else rate_hz / 2
 
 
 def dominant_time_constant_s(den: np.ndarray) -> float:

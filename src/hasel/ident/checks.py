@@ -13,8 +13,22 @@ A model is usable when all of these hold:
    band's low edge to twice its top): the data cannot support it;
 3. the static gain ``G(0)`` agrees with the slope of the measured static map (mean
    output against mean input) within ``max(3 standard errors, DC_REL_TOL)``;
-4. the held-out time-domain compare fit, ``100 (1 - NRMSE)``, is at least the stated
-   threshold (default 80 %).
+4. the held-out time-domain compare fit is at least the stated threshold (default
+   80 %) once the part of the error that the measurement noise explains is taken
+   out: ``100 (1 - sqrt(max(NRMSE^2 - floor^2, 0)))`` with ``floor`` the noise's rms
+   over the held-out output's (a noisy log cannot score higher than its noise allows,
+   so a fixed threshold would refuse right models of noisy logs);
+5. inside the excited band the model agrees with the measured non-parametric
+   frequency response: a point disagrees when ``|G - H|`` exceeds both
+   ``INBAND_Z`` of its standard errors and ``INBAND_REL_TOL`` (0.8 dB / 5.7 deg) of
+   the larger of ``|H|`` and a tenth of the static gain (deep in the roll-off, 20 dB
+   down, an error moves the output little);
+   more than ``INBAND_MAX_SHARE`` of the points, or a run of them spanning more than
+   an octave, make the model unusable (a good time-domain score can hide a
+   model that is wrong over part of the band). Only points whose estimate has a
+   coherence of at least ``INBAND_MIN_COHERENCE`` are judged. :func:`~hasel.ident.identify`
+   runs it on leakage-free estimates only (whole periods of a periodic input), whose
+   error bars hold.
 
 Each failure comes with the experiment that would fix it.
 """
@@ -26,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ModelCheck", "check_model", "check_model_json", "MARGINAL_DAMPING", "LIGHT_DAMPING", "DC_REL_TOL",
+__all__ = ["ModelCheck", "check_model", "check_model_json", "inband_errors", "MARGINAL_DAMPING", "LIGHT_DAMPING", "DC_REL_TOL",
            "MIN_COMPARE_FIT_PCT"]
 
 #: Damping ratio below which a pole counts as near-marginal (unusable anywhere).
@@ -40,6 +54,12 @@ STATIC_BAND_FRACTION = 0.2
 DC_REL_TOL = 0.03
 #: Default threshold of the held-out compare fit, percent.
 MIN_COMPARE_FIT_PCT = 80.0
+#: In-band agreement: standard errors, relative tolerance, share of points, longest run (octaves).
+INBAND_Z = 4.0
+INBAND_REL_TOL = 0.1
+INBAND_MAX_SHARE = 0.2
+INBAND_MAX_RUN_OCTAVES = 1.0
+INBAND_MIN_COHERENCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -84,7 +104,9 @@ def _damping(r: np.ndarray) -> np.ndarray:
 
 def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope: float | None = None,
                 static_ci: float | None = None, heldout_nrmse: float | None = None,
-                min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT, rhp_zeros_shown: bool = False) -> ModelCheck:
+                min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT, rhp_zeros_shown: bool = False,
+                noise_floor: float | None = None, measured: Any = None,
+                timing_offset_s: float = 0.0) -> ModelCheck:
     """Run the checks of this module on a continuous transfer function.
 
     Parameters
@@ -104,6 +126,15 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
     rhp_zeros_shown : bool
         The held-out data showed that the right-half-plane zeros are needed (their
         mirror image fits worse): they are not held against the model.
+    noise_floor : float, optional
+        The measurement noise's rms over the held-out output's (centred) rms: the
+        NRMSE a perfect model would score. None: no credit for noise.
+    measured : FreqResp, optional
+        The non-parametric frequency response over the excited band (with ``sigma``)
+        for the in-band agreement check.
+    timing_offset_s : float
+        Timing offset estimated with the model, s: the measured response follows
+        ``G(s) exp(-s timing_offset_s)``.
 
     Returns
     -------
@@ -172,13 +203,87 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
                          f"{STATIC_BAND_FRACTION * f_slow:.3g} Hz")
     if heldout_nrmse is not None:
         pct = 100.0 * (1.0 - heldout_nrmse) if math.isfinite(heldout_nrmse) else -math.inf
+        floor = float(noise_floor) if noise_floor is not None and math.isfinite(noise_floor) else 0.0
+        # the model's own share of the error: what is left once the noise's share is taken out (noise and
+        # model error are uncorrelated, so their squares add); the noise is credited at most to 90 % of it
+        floor = min(max(floor, 0.0), 0.9 * heldout_nrmse) if math.isfinite(heldout_nrmse) else 0.0
+        model_nrmse = math.sqrt(max(heldout_nrmse ** 2 - floor ** 2, 0.0)) if math.isfinite(heldout_nrmse) \
+            else math.inf
+        pct_model = 100.0 * (1.0 - model_nrmse) if math.isfinite(model_nrmse) else -math.inf
         details.update(heldout_compare_fit_pct=pct if math.isfinite(pct) else None,
+                       noise_floor_nrmse=floor, heldout_model_fit_pct=pct_model if math.isfinite(pct_model) else None,
                        min_compare_fit_pct=float(min_compare_fit_pct))
-        if pct < min_compare_fit_pct:
-            reasons.append(f"held-out compare fit {pct:.1f} % is below {min_compare_fit_pct:g} %")
+        if pct_model < min_compare_fit_pct:
+            reasons.append(f"held-out compare fit {pct:.1f} % ({pct_model:.1f} % with the noise's share "
+                           f"{100 * floor:.2g} % taken out) is below {min_compare_fit_pct:g} %")
             fixes.append(f"repeat the excitation (several periods or chirps per offset) over {band_txt} so the "
                          "held-out part holds the same frequencies, or lower the noise")
+    if measured is not None and band_hz is not None:
+        _inband(model, measured, band_hz, timing_offset_s, reasons, fixes, details)
     return ModelCheck(usable=not reasons, reasons=reasons, fixes=fixes, details=details)
+
+
+def inband_errors(model: Any, measured: Any, band_hz: tuple[float, float], timing_offset_s: float = 0.0
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The model against a measured response at its judged points (check 5 of the module).
+
+    Returns ``(f_hz, G/H, rel, z)``: frequencies, the ratio of model (with its delay and
+    timing offset) to measurement, ``|G/H - 1|`` measured against the larger of ``|H|``
+    and a tenth of the static gain (errors deep in the roll-off, 20 dB down, count
+    less), and ``|G - H|`` in standard errors of one real or imaginary part. None with
+    fewer than four judged points.
+    """
+    num = np.atleast_1d(np.asarray(model.num, float))
+    den = np.atleast_1d(np.asarray(model.den, float))
+    f = np.asarray(measured.f_hz, float)
+    H = np.asarray(measured.H, complex)
+    sig = np.asarray(measured.sigma, float)
+    coh = np.asarray(getattr(measured, "coherence", np.full(f.size, np.nan)), float)
+    use = (f >= band_hz[0]) & (f <= band_hz[1]) & np.isfinite(H) & np.isfinite(sig) & (np.abs(H) > 0)
+    # only where the estimate's error is small and near-Gaussian: coherence >= 0.5 (or, without a
+    # coherence, a relative standard error <= 0.3); elsewhere the output is mostly noise
+    with np.errstate(divide="ignore", invalid="ignore"):
+        use &= np.where(np.isfinite(coh), coh >= INBAND_MIN_COHERENCE, sig / np.abs(H) <= 0.3)
+    if np.count_nonzero(use) < 4:
+        return None
+    f, H, sig = f[use], H[use], sig[use]
+    s = 2j * math.pi * f
+    delay = float(getattr(model, "delay_s", 0.0) or 0.0)
+    G = np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * (delay + timing_offset_s))
+    g0 = abs(float(num[-1] / den[-1])) if den[-1] != 0 else 0.0
+    rel = np.abs(G - H) / np.maximum(np.abs(H), 0.1 * g0)
+    z = np.abs(G - H) / np.maximum(sig / math.sqrt(2.0), 1e-300)   # per real/imaginary part
+    return f, G / H, rel, z
+
+
+def _inband(model: Any, measured: Any, band_hz: tuple[float, float],
+            timing_offset_s: float, reasons: list[str], fixes: list[str], details: dict[str, Any]) -> None:
+    """Check 5 of the module: the model against the measured response inside the band (appends a reason)."""
+    got = inband_errors(model, measured, band_hz, timing_offset_s)
+    if got is None:
+        return
+    f, ratio, rel, z = got
+    bad = (z > INBAND_Z) & (rel > INBAND_REL_TOL)
+    # the longest run of disagreeing neighbours, in octaves
+    run, start = 0.0, None
+    for i in range(f.size):
+        if bad[i]:
+            start = f[i] if start is None else start
+            run = max(run, math.log2(f[i] / start))
+        else:
+            start = None
+    share = float(np.mean(bad))
+    err_db = 20 * np.log10(np.abs(ratio))
+    err_deg = np.degrees(np.angle(ratio))
+    details.update(inband_disagreeing_share=share, inband_longest_run_octaves=run,
+                   inband_max_db=float(np.max(np.abs(err_db))), inband_max_deg=float(np.max(np.abs(err_deg))))
+    if share > INBAND_MAX_SHARE or run > INBAND_MAX_RUN_OCTAVES:
+        i = int(np.argmax(np.where(bad, rel, -1.0)))
+        reasons.append(f"the model disagrees with the measured frequency response at {100 * share:.0f} % of the "
+                       f"excited band's points (a run of {run:.2g} octaves; the worst at {f[i]:.3g} Hz: "
+                       f"{err_db[i]:+.2g} dB, {err_deg[i]:+.2g} deg, {z[i]:.2g} standard errors)")
+        fixes.append("give --order (more poles) or a longer, repeated excitation over that band; if the "
+                     "response depends on the operating point, identify each operating point on its own")
 
 
 def check_model_json(model_json: dict[str, Any], *, min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT) -> ModelCheck:

@@ -214,8 +214,8 @@ class ResidualDependence:
     Attributes
     ----------
     chi2, dof, p_value : float, int, float
-        ``(K - 1) F`` of the two-way analysis of variance (see :func:`residual_dependence`),
-        its numerator degrees of freedom ``K - 1``, and the Bonferroni p-value.
+        Friedman's ``Q`` (see :func:`residual_dependence`), its degrees of freedom
+        ``K - 1``, and the Bonferroni p-value.
     coefficients : list of (float, float)
         Per operating point: relative gain correction and lag correction (s) of the
         common model that fits its residual best.
@@ -239,32 +239,33 @@ class ResidualDependence:
 #: What :func:`residual_dependence` assumes (reported in the JSON and the summary).
 RESIDUAL_TEST_ASSUMPTIONS = (
     "one linear model fitted to the whole log (its simulation runs through every transient, so start-up "
-    "transients are not in the residual); each operating point is cut into 4 equal sub-blocks and the "
+    "transients are not in the residual); each operating point is cut into 16 equal sub-blocks and the "
     "residual of each is regressed on the model's response and its derivative (a local gain and lag "
-    "correction); a two-way analysis of variance (operating point x sub-block, no replication) tests the "
-    "operating-point effect against the interaction, so the error estimate is the observed block-to-block "
-    "variability (it holds for coloured noise, correlated samples and leakage alike) and model error shared "
-    "by the points at the same position in their excitation cancels in the sub-block effect; assumes the "
-    "sub-block estimates are independent with equal variance; gain and lag p-values combined by Bonferroni")
+    "correction); Friedman's rank test (operating point x sub-block) asks whether some operating points rank "
+    "consistently higher within the sub-blocks, so the error estimate is the observed block-to-block "
+    "variability (it holds for coloured noise, correlated samples and leakage alike), model error shared by "
+    "the points at the same position in their excitation cancels within each sub-block, and sub-blocks of "
+    "very different precision (a sweep's slow start against its fast end) weigh alike; assumes that within "
+    "a sub-block the operating points' estimates are exchangeable under independence (the same excitation at "
+    "the same position, independent noise), which fails when the detected operating points are not aligned "
+    "on the excitation (give markers); gain and lag p-values combined by Bonferroni")
 
 
-def _anova_rows(C: np.ndarray) -> tuple[float, int, int, float]:
-    """Two-way ANOVA without replication on ``C[k, b]``: F of the row effect, its dofs and p-value."""
+def _friedman_rows(C: np.ndarray) -> tuple[float, int, float]:
+    """Friedman's test of a row effect in ``C[k, b]`` (rows ranked within each column): Q, its dof, p-value.
+
+    ``Q = 12 / (B K (K + 1)) sum_k R_k^2 - 3 B (K + 1)`` with ``R_k`` the rank sum of row
+    ``k``, compared with chi-square of ``K - 1`` degrees of freedom. Ranks make columns of
+    any scale weigh alike.
+    """
     K, B = C.shape
-    grand = C.mean()
-    rows = C.mean(axis=1, keepdims=True)
-    cols = C.mean(axis=0, keepdims=True)
-    ss_rows = B * float(np.sum((rows - grand) ** 2))
-    ss_res = float(np.sum((C - rows - cols + grand) ** 2))
-    d1, d2 = K - 1, (K - 1) * (B - 1)
-    if ss_res <= 0:
-        return float("inf"), d1, d2, 0.0
-    F = (ss_rows / d1) / (ss_res / d2)
-    return F, d1, d2, float(stats.f.sf(F, d1, d2))
+    R = stats.rankdata(C, axis=0).sum(axis=1)
+    Q = 12.0 / (B * K * (K + 1)) * float(np.sum(R * R)) - 3.0 * B * (K + 1)
+    return Q, K - 1, float(stats.chi2.sf(Q, K - 1))
 
 
 def residual_dependence(y: np.ndarray, y_hat: np.ndarray, pieces: Sequence[tuple[int, int]], rate_hz: float, *,
-                        sub_blocks: int = 4) -> ResidualDependence | None:
+                        sub_blocks: int = 16) -> ResidualDependence | None:
     """A calibrated test of offset dependence from the time-domain residual of one common model.
 
     Parameters
@@ -288,9 +289,9 @@ def residual_dependence(y: np.ndarray, y_hat: np.ndarray, pieces: Sequence[tuple
     In sub-block ``b`` of operating point ``k``, with ``x1`` the model response about
     its mean and ``x2 = dx1/dt``: ``y - y_hat = c1 x1 - c2 x2 + const + e`` (``c1`` a
     relative gain change, ``c2`` a lag, s). For ``c1`` and ``c2`` separately, the
-    operating-point effect of ``c[k, b]`` is F-tested against the interaction with
-    ``(K - 1, (K - 1)(B - 1))`` degrees of freedom. ``chi2`` reports ``(K - 1) F`` of
-    the smaller p-value. See :data:`RESIDUAL_TEST_ASSUMPTIONS`.
+    operating-point effect of ``c[k, b]`` is tested by Friedman's rank test (operating
+    points ranked within each sub-block; chi-square of ``K - 1`` degrees of freedom).
+    ``chi2`` reports ``Q`` of the smaller p-value. See :data:`RESIDUAL_TEST_ASSUMPTIONS`.
     """
     # only operating points of one length compare like with like (same excitation at the same sub-block)
     n_med = float(np.median([i1 - i0 for i0, i1 in pieces])) if len(pieces) else 0.0
@@ -309,10 +310,10 @@ def residual_dependence(y: np.ndarray, y_hat: np.ndarray, pieces: Sequence[tuple
             X = np.column_stack([x1, x2, np.ones(x1.size)])
             c = np.linalg.lstsq(X, r, rcond=None)[0]
             C[:, k, b] = c[:2]
-    res = [_anova_rows(C[j]) for j in range(2)]
-    p = min(1.0, 2.0 * min(r[3] for r in res))
-    j = int(np.argmin([r[3] for r in res]))
-    F, d1, d2, _ = res[j]
+    res = [_friedman_rows(C[j]) for j in range(2)]
+    p = min(1.0, 2.0 * min(r[2] for r in res))
+    j = int(np.argmin([r[2] for r in res]))
+    Q, d1, _ = res[j]
     coefs = [(float(C[0, k].mean()), float(C[1, k].mean())) for k in range(K)]
     ses = [(float(C[0, k].std(ddof=1) / np.sqrt(B)), float(C[1, k].std(ddof=1) / np.sqrt(B))) for k in range(K)]
-    return ResidualDependence(float(F * d1), int(d1), p, coefs, ses, 0, RESIDUAL_TEST_ASSUMPTIONS)
+    return ResidualDependence(float(Q), int(d1), p, coefs, ses, 0, RESIDUAL_TEST_ASSUMPTIONS)

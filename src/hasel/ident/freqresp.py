@@ -159,6 +159,7 @@ def detect_period(u: np.ndarray, rate_hz: float, *, min_period_s: float | None =
     e_tail = c2[-1] - np.concatenate([[0.0], c2[: acf.size - 1]])  # sum of x[lag : n]^2
     with np.errstate(invalid="ignore", divide="ignore"):
         r = acf / np.sqrt(e_head * e_tail)
+    r = np.where(np.isfinite(r), r, 0.0)   # lags whose overlap holds no energy correlate with nothing
     lo = max(2, int(round((min_period_s or 0.0) * rate_hz)), 20)
     if lo >= r.size - 1:
         return None

@@ -47,7 +47,7 @@ from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_rat
                                   welch_plan)
 from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
 from hasel.ident.staticmap import StaticMap, fit_static_map
-from hasel.ident.checks import ModelCheck, check_model
+from hasel.ident.checks import ModelCheck, check_model, inband_errors
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
 from hasel.ident.timefit import arx_start, interleaved, oe_fit
 from hasel.ident.validation import compare_fit
@@ -112,7 +112,17 @@ class IdentOptions:
         Budget of the output-error refinement per candidate order.
     min_compare_fit_pct : float
         Held-out compare fit below which the model is not usable (see
-        :mod:`hasel.ident.checks`).
+        :mod:`hasel.ident.checks`), after the part of the error the measurement
+        noise explains is taken out.
+    max_timing_samples : float
+        Largest timing offset between the input and output samples estimated
+        alongside the model, raw samples (0: none). Loggers differ by up to about a
+        sample (input held or interpolated, output read at the start or the middle of
+        a sample, a skew between channels); estimated, it is reported as
+        ``timing_offset_s`` instead of bending ``G(s)``'s phase. Off by default (the
+        zero-order-hold convention): on noise-free or weakly exciting logs the extra
+        freedom let the order selection over-fit (a spurious slow pole pair); 1 for
+        logs of unknown convention.
     """
 
     band_hz: tuple[float, float] | None = None
@@ -135,6 +145,7 @@ class IdentOptions:
     input_hold: str = "zoh"
     oe_max_nfev: int = 40
     min_compare_fit_pct: float = 80.0
+    max_timing_samples: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -238,6 +249,15 @@ class IdentResult:
         Remarks (resampling, estimator choice, loader notes).
     timings_s : dict of str to float
         Wall time per stage, s.
+    check : ModelCheck or None
+        The model's own checks (:mod:`hasel.ident.checks`).
+    static_slope_ci : float or None
+        Standard error of the static map's slope, output/input unit.
+    timing_offset_s : float
+        Timing offset of the output samples against the input samples estimated with
+        the model, s: the data follow ``G(s) exp(-s timing_offset_s)`` (> 0: the output
+        lags, like a delay; < 0: it is ahead, as with an input interpolated between
+        samples). Not part of ``G(s)``.
     """
 
     points: list[OperatingPoint]
@@ -261,6 +281,7 @@ class IdentResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     check: ModelCheck | None = None
     static_slope_ci: float | None = None
+    timing_offset_s: float = 0.0
 
     @property
     def usable(self) -> bool:
@@ -289,7 +310,9 @@ class IdentResult:
             f"operating points: {len(self.points)} "
             f"({', '.join(f'{p.mean_input:.3g}' for p in self.points)}{(' ' + self.input_unit) if self.input_unit else ''})",
             f"model order: {self.fit.nz} zeros / {self.fit.np} poles"
-            + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else ""),
+            + (f", delay {m.delay_s * 1e3:.3g} ms" if m.delay_s > 0 else "")
+            + (f"; timing offset of the output samples {self.timing_offset_s * 1e3:+.3g} ms (a sampling "
+               "convention, > 0 lagging; not part of G(s))" if abs(self.timing_offset_s) * self.rate_hz >= 0.05 else ""),
             f"static gain G(0): {m.dc_gain:.4g} {self.gain_unit}; " + (
                 f"static map slope at the mean offset: "
                 f"{float(self.static_map.slope(np.mean(self.static_map.offsets))):.4g} {self.gain_unit} "
@@ -321,7 +344,7 @@ class IdentResult:
     def to_model_json(self) -> dict[str, Any]:
         """MODEL.json: ``{"num": [...], "den": [...]}`` (descending powers of s) and more keys.
 
-        Extra keys: ``delay_s``, ``zeros``/``poles`` (``[re, im]`` pairs, rad/s),
+        Extra keys: ``delay_s``, ``timing_offset_s`` (the data follow ``G(s) exp(-s timing_offset_s)``; a sampling convention, not in ``G``), ``zeros``/``poles`` (``[re, im]`` pairs, rad/s),
         ``gain`` (zero-pole-gain ``k``), ``static_gain`` (``G(0)``), ``order``,
         ``units``, ``signals``, ``frequency_band_hz``, ``fit`` (quality and the order
         scores), ``static_map``, ``operating_points``, ``offset_dependence``,
@@ -344,6 +367,7 @@ class IdentResult:
             "num": [float(c) for c in m.num],
             "den": [float(c) for c in m.den],
             "delay_s": float(m.delay_s),
+            "timing_offset_s": float(self.timing_offset_s),
             "zeros": pairs(m.zeros),
             "poles": pairs(m.poles),
             "gain": float(m.gain),
@@ -469,6 +493,16 @@ def _refine_period(u: np.ndarray, approx_samples: float) -> float:
     return float(best_k)
 
 
+def _repeats(x: np.ndarray, n: int, tol: float = 0.05) -> bool:
+    """True if ``x`` repeats itself every ``n`` samples: the rms change from one period to the next is at most
+    ``tol`` of its rms about the mean (a correlated but different pattern, such as a staircase whose second half
+    has other levels, is not periodic: an FFT over its "periods" would not be leakage-free)."""
+    if n <= 0 or x.size < 2 * n:
+        return False
+    d = x[n:] - x[:-n]
+    return float(np.sqrt(np.mean(d * d))) <= tol * float(np.std(x))
+
+
 def _clipped_fraction(y: np.ndarray) -> tuple[float, float]:
     """Largest fraction of samples sitting exactly at the maximum or the minimum, and that value."""
     hi, lo = float(np.max(y)), float(np.min(y))
@@ -555,7 +589,7 @@ def _frequency_responses(segs: list[Segment], t: np.ndarray, uu: np.ndarray, yy:
         means.append((float(np.mean(ud[ud.size // 2:])), float(np.mean(yd[yd.size // 2:]))))
     n_per = [None if p is None else int(round(p * rate)) for p in periods]
     periodic = all(n is not None and 2 * n <= ud.size * M for n, (ud, _) in zip(n_per, dec)) and \
-        len(set(n_per)) == 1
+        len(set(n_per)) == 1 and all(_repeats(uu[s.i0:s.i1], n_per[0]) for s in segs)
     ffts: list[FreqResp] = []
     for s, (ud, _), p in zip(segs, dec, periods):
         n_raw = ud.size * M
@@ -620,6 +654,99 @@ def _steady_means(u: np.ndarray, y: np.ndarray, rate: float) -> tuple[np.ndarray
     return np.array(xs), np.array(ys)
 
 
+def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
+                   block: int, floor: float | None, measured: FreqResp, band: tuple[float, float],
+                   notes: list[str]) -> Any:
+    """Keep the estimated timing offset only if the data ask for it; else refit without one.
+
+    A sub-sample lag and a slightly different pole pair near the band's top look alike
+    in the time domain; the default is the zero-order-hold convention with no offset.
+    The offset is kept when the model's own share of the held-out error (the noise's
+    share taken out) or its disagreement with the measured response in the band
+    (mean squared standard errors, each capped at 100) is at least 20 % smaller with it
+    and neither is 20 % larger.
+    """
+    oe0 = oe_fit(oe.model, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev)
+    f2 = (floor or 0.0) ** 2
+    e_free = math.sqrt(max(oe.nrmse_heldout ** 2 - f2, 0.0))
+    e_zero = math.sqrt(max(oe0.nrmse_heldout ** 2 - f2, 0.0)) if math.isfinite(oe0.nrmse_heldout) else math.inf
+
+    def freq_cost(o: Any) -> float:
+        got = inband_errors(o.model, measured, band, -o.shift / rate)
+        return math.inf if got is None else float(np.mean(np.minimum(got[3] ** 2, 100.0)))
+
+    c_free, c_zero = freq_cost(oe), freq_cost(oe0)
+    ms = 1e3 * oe.shift / rate
+    better = e_free < 0.8 * e_zero or (math.isfinite(c_zero) and c_free < 0.8 * c_zero)
+    worse = e_free > 1.2 * e_zero or (math.isfinite(c_free) and c_free > 1.2 * c_zero)
+    if better and not worse:
+        notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
+                     f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
+                     f"in-band disagreement {c_free:.3g} against {c_zero:.3g}")
+        return oe
+    notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms) changes the held-out "
+                 f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
+                 f"to {c_free:.3g}; the zero-order-hold convention is kept")
+    return oe0
+
+
+def _noise_floor(yy: np.ndarray, segs: list[Segment], fr: _FR, M: int, yd: np.ndarray, y_hat: np.ndarray,
+                 pieces: Any, band: tuple[float, float], rate: float) -> tuple[float | None, str]:
+    """The measurement noise's rms over the held-out output's centred rms, and how it was estimated.
+
+    With a periodic input, model-free: consecutive periods of the output differ only by
+    noise (block means on the working grid, so the noise is the one the NRMSE sees).
+    Otherwise from the residual's spectrum where the model's own output is below a
+    tenth of it (above the band, or where the plant has rolled off), assumed white:
+    noise that falls off there is under-estimated, which only makes the check
+    stricter. None when neither applies.
+    """
+    held = pieces.heldout
+    idx = np.flatnonzero(held)
+    if idx.size < 8:
+        return None, ""
+    den = 0.0
+    for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+        den += float(np.sum((yd[run] - yd[run].mean()) ** 2))
+    var_y = den / idx.size
+    if var_y <= 0:
+        return None, ""
+    var_n, how = None, ""
+    if fr.periodic and fr.periods[0] is not None:
+        c = np.concatenate([[0.0], np.cumsum(yy)])
+        n_per = int(round(fr.periods[0] * M * rate))
+        sq, cnt = 0.0, 0
+        for sg in segs:
+            i = np.arange(sg.i0, sg.i1 - n_per - M + 1, M)
+            if i.size < 4:
+                continue
+            d = ((c[i + M] - c[i]) - (c[i + n_per + M] - c[i + n_per])) / M
+            d = d - d.mean()
+            sq += float(d @ d)
+            cnt += d.size
+        if cnt >= 16:
+            var_n, how = sq / cnt / 2.0, "from the differences between consecutive periods"
+    if var_n is None:
+        from scipy import signal as sp_signal
+
+        sel = pieces.estimate | held
+        r, yh = (yd - y_hat)[sel], y_hat[sel]
+        if r.size >= 256:
+            nper = min(1024, r.size // 4)
+            f, p = sp_signal.welch(r - r.mean(), fs=rate, nperseg=nper)
+            _, ph = sp_signal.welch(yh - yh.mean(), fs=rate, nperseg=nper)
+            # where the model's own output is below a tenth of the residual, the residual is noise (a model
+            # error there is at most of the model's size)
+            quiet = (f > 0) & (ph <= 0.1 * p)
+            if np.count_nonzero(quiet) >= 4:
+                var_n = float(np.mean(p[quiet])) * rate / 2.0
+                how = (f"white-noise level of the residual at the {np.count_nonzero(quiet)} frequencies where "
+                       "the model's output is below a tenth of it")
+    if var_n is None:
+        return None, ""
+    return math.sqrt(var_n / var_y), how
+
+
 def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes):
     """Right-half-plane zeros outside the excited band are not supported by the data: mirror them, refine again.
 
@@ -638,7 +765,10 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
     if num[-1] != 0:
         num = num * g_old / num[-1]   # keep G(0)
     m = TFModel(num, oe.model.den)
-    oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev)
+    oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
+                 # the timing choice stands: estimated again only if it was kept
+                 max_shift=max(float(opts.max_timing_samples), 0.0) / block if oe.shift != 0.0 else 0.0,
+                 shift0=oe.shift)
     z2 = oe2.model.zeros
     f2 = np.abs(z2) / (2 * np.pi)
     still = np.any((np.real(z2) > 0) & ((f2 < band[0] / 2) | (f2 > 2 * band[1])))
@@ -842,6 +972,8 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
                      "output-error fit and of the validation")
     if not np.any(pieces.estimate):
         raise BadInputError("the log is too short: nothing left to estimate from after the settling time")
+    # the timing offset between the channels, bounded to max_timing_samples raw samples (working samples here)
+    max_shift = max(float(opts.max_timing_samples), 0.0) / oe_block
     candidates = []
     n_ps = [int(opts.order[1])] if opts.order is not None else list(range(1, opts.max_poles + 1))
     best, stale = np.inf, 0
@@ -858,12 +990,12 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             starts.append(arx)
         if not starts:
             continue
-        pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0)
-               for m in starts]
+        pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0,
+                      max_shift=max_shift) for m in starts]
         pre_cost = np.array([p.nrmse_estimate for p in pre], float)
         best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
         oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
-                    max_nfev=opts.oe_max_nfev)
+                    max_nfev=opts.oe_max_nfev, max_shift=max_shift)
         score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
         # the starts themselves compete too (a refinement that does not generalise loses on held-out data)
         for pr in pre:
@@ -882,6 +1014,11 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")
     ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12] or candidates
     nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
+    floor, floor_how = (_noise_floor(yy, segs, fr, oe_block, yd_all, oe.y_hat, pieces, band, oe_rate)
+                        if hold > 0 else (None, ""))
+    if max_shift > 0 and hold > 0 and math.isfinite(oe.nrmse_heldout):
+        oe = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data, band, notes)
+    # after the timing choice: a refit without the offset may bring back a far right-half-plane zero
     oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)
     scores = [OrderScore(c[0], c[1], float(c[3].nrmse_estimate), float(c[4])) for c in candidates]
@@ -930,12 +1067,22 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         notes.append("the static map does not pin the static gain (fewer than three levels, a slope error "
                      "above 10 %, or levels closer together than the excitation's swing): G(0) was not "
                      "checked against it")
+    if floor is not None:
+        notes.append(f"measurement noise {100 * floor:.2g} % of the held-out output's rms ({floor_how}): the "
+                     "held-out fit is judged with that share taken out")
     check = check_model(model, band_hz=band, static_slope=slope0 if informative else None,
                         static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
-                        min_compare_fit_pct=opts.min_compare_fit_pct, rhp_zeros_shown=rhp_shown)
+                        min_compare_fit_pct=opts.min_compare_fit_pct, rhp_zeros_shown=rhp_shown,
+                        noise_floor=floor, measured=fit_data if fr.periodic else None,
+                        timing_offset_s=-float(oe.shift) / oe_rate)
+    if not fr.periodic:
+        notes.append("the model was not checked against the measured frequency response in the band: a "
+                     "non-periodic input's Welch estimate carries a leakage and transient bias that its error "
+                     "bars do not hold (repeat the excitation, whole periods per operating point, for that check)")
     lap("validation")
     return IdentResult(points=points, skipped=skipped, pooled=pooled, fit_data=fit_data, estimator=fr.estimator,
                        static_map=smap, fit=fit, dependence=dep,
                        validation=validation, band_hz=band, rate_hz=rate, analysis_rate_hz=fs,
                        input_name=input_name, output_name=output_name, input_unit=in_unit, output_unit=out_unit,
-                       options=opts, notes=notes, timings_s=timings, check=check, static_slope_ci=static_ci)
+                       options=opts, notes=notes, timings_s=timings, check=check, static_slope_ci=static_ci,
+                       timing_offset_s=-float(oe.shift) / oe_rate)

@@ -20,6 +20,13 @@ With block-averaged data (``M`` raw samples per block) the block mean of the out
 sits ``(M - 1) / 2`` raw samples after the block's start; the simulation is
 interpolated there.
 
+Timing offset: loggers differ in how the input and output samples line up (an input
+held or interpolated over each sample, an output read at the sample's start or in its
+middle, a fractional-sample skew between channels). That is a shift of at most about
+one raw sample between the channels, not dynamics. :func:`oe_fit` estimates it (bounded
+to ``max_shift`` samples) so that it does not end up in ``G(s)`` as phase; it is
+reported on its own.
+
 The simulation is the sum of first- and second-order sections in parallel (the
 partial fractions of ``G``), each discretised by its exact ZOH formula: fast enough
 to evaluate hundreds of times on 10^5 samples, well conditioned for lightly damped
@@ -42,6 +49,9 @@ __all__ = ["simulate_zoh", "Pieces", "OEResult", "oe_fit", "HOLDS"]
 
 #: Accepted sampling conventions of the input.
 HOLDS = ("zoh", "centred")
+#: Bound of the output-error parameters (logs of scaled polynomial coefficients): e^60 is far beyond any
+#: physical pole ratio, and keeps products of them finite
+_THETA_MAX = 60.0
 
 
 def _pole_sections(poles: np.ndarray, residues: np.ndarray, dt: float) -> list[np.ndarray]:
@@ -66,7 +76,8 @@ def _pole_sections(poles: np.ndarray, residues: np.ndarray, dt: float) -> list[n
     return secs
 
 
-def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1) -> np.ndarray:
+def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1,
+                 shift: float = 0.0) -> np.ndarray:
     """Output of ``model`` for the input ``u`` (deviation from rest), sampled at ``rate_hz``.
 
     Parameters
@@ -82,6 +93,11 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
     block : int
         Raw samples averaged into each sample of ``u`` and of the data compared with
         (1 for raw data).
+    shift : float
+        Where the data's output samples sit on the simulation's time axis, in samples
+        of ``u``: ``y_data[k] = y_sim(k + shift)`` (linear interpolation). Positive
+        when the data's output is ahead of the model (a first-order hold of the
+        input), negative when it lags (a skew of the output channel).
 
     Returns
     -------
@@ -96,7 +112,13 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
         x = np.concatenate([np.zeros(min(lag, x.size)), x[: max(x.size - lag, 0)]])
     y = _sim_modal(np.asarray(model.num, float), np.asarray(model.den, float), x, 1.0 / rate_hz)
     # where the data's sample sits between two simulated samples, in samples
-    frac = (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0)
+    frac = (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0) + float(shift)
+    whole = int(np.floor(frac))
+    frac -= whole
+    if whole > 0:
+        y = np.concatenate([y[whole:], np.repeat(y[-1:], whole)])
+    elif whole < 0:
+        y = np.concatenate([np.repeat(y[:1], -whole), y[:whole]])
     if frac > 0:
         yn = np.concatenate([y[1:], y[-1:]])
         y = (1.0 - frac) * y + frac * yn
@@ -182,6 +204,9 @@ class OEResult:
         The fitted output constant of each piece.
     y_hat : ndarray
         The simulation over the whole log.
+    shift : float
+        Estimated timing offset, samples of the data, as :func:`simulate_zoh`'s
+        ``shift`` (0 when not estimated).
     """
 
     model: TFModel
@@ -189,6 +214,7 @@ class OEResult:
     nrmse_heldout: float
     levels: list[float]
     y_hat: np.ndarray
+    shift: float = 0.0
 
 
 def _to_theta(model: TFModel, w0: float) -> tuple[np.ndarray, int, int]:
@@ -227,7 +253,8 @@ def _from_theta(theta: np.ndarray, nz: int, n_p: int, w0: float) -> TFModel:
 
 
 def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *, hold: str = "zoh",
-           block: int = 1, max_nfev: int = 60, log_pmin: float | None = None) -> OEResult:
+           block: int = 1, max_nfev: int = 60, log_pmin: float | None = None, max_shift: float = 0.0,
+           shift0: float = 0.0, offset: float = 0.0) -> OEResult:
     """Refine ``model0`` (same orders) by output error on ``pieces.estimate``; score on ``pieces.heldout``.
 
     Parameters
@@ -246,6 +273,13 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
         Budget of the least-squares refinement (function evaluations).
     log_pmin : float, optional
         Natural log of the smallest pole magnitude allowed, rad/s (default: none).
+    max_shift : float
+        Largest timing offset estimated, samples of ``u`` (0: none estimated).
+    shift0 : float
+        Start of the timing offset, samples (within ``max_shift``).
+    offset : float
+        A fixed timing offset added to the estimated one, samples (as
+        :func:`simulate_zoh`'s ``shift``).
 
     Returns
     -------
@@ -254,15 +288,32 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     w0 = float(np.max(np.abs(np.roots(model0.den)))) if model0.den.size > 1 else 1.0
     w0 = max(w0, 1e-6)
     theta0, nz, n_p = _to_theta(model0, w0)
+    n_th = theta0.size
+    if max_shift > 0:
+        # the offset enters as max_shift * tanh(theta[-1]): bounded, smooth
+        theta0 = np.append(theta0, np.arctanh(np.clip(shift0 / max_shift, -0.99, 0.99)))
     est = pieces.estimate
     lo_bound = None
     if log_pmin is not None:
         lo_bound = log_pmin - np.log(w0)
 
+    def clip(theta: np.ndarray) -> np.ndarray:
+        # only the logs of the factors' coefficients are bounded (the numerator is free)
+        out = theta.copy()
+        out[nz + 1:] = np.clip(out[nz + 1:], -_THETA_MAX, _THETA_MAX)
+        return out
+
+    def shift_of(theta: np.ndarray) -> float:
+        return float(max_shift * np.tanh(theta[n_th])) if max_shift > 0 else 0.0
+
+    def total_shift(theta: np.ndarray) -> float:
+        return offset + shift_of(theta)
+
     def sim(theta: np.ndarray) -> tuple[np.ndarray, list[float]]:
-        th = theta
+        sh = total_shift(theta)
+        th = theta[:n_th]
         if lo_bound is not None:
-            th = theta.copy()
+            th = th.copy()
             q = th[nz + 1:]
             q[1:2 * (n_p // 2):2] = np.maximum(q[1:2 * (n_p // 2):2], 2 * lo_bound)
             if n_p % 2:
@@ -271,7 +322,7 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
         out = np.empty_like(y)
         levels = []
         for i0, i1 in pieces.bounds:
-            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block)
+            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
             e = est[i0:i1]
             c = float(np.mean(y[i0:i1][e] - ys[e])) if np.any(e) else float(np.mean(y[i0:i1] - ys))
             out[i0:i1] = ys + c
@@ -283,21 +334,24 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     def resid(theta: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
             try:
-                yh, _ = sim(np.clip(theta, -700.0, 700.0))
-            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+                yh, _ = sim(clip(theta))
+            except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, StopIteration):
+                # StopIteration: hasel.lti's pairing of (nearly) repeated poles gives up on a diverged set
                 return np.full(int(np.count_nonzero(est)), 1e3)
         r = (y[est] - yh[est]) / scale
         return np.where(np.isfinite(r), r, 1e3)
 
     r0 = resid(theta0)
-    if max_nfev <= 0:
-        yh, levels = sim(theta0)
-        return OEResult(_from_theta(theta0, nz, n_p, w0), _nrmse(y, yh, pieces, est),
-                        _nrmse(y, yh, pieces, pieces.heldout), levels, yh)
-    theta = _levenberg_marquardt(resid, theta0, r0, max_iter=max(1, max_nfev // 3))
-    yh, levels = sim(theta)
-    model = _from_theta(theta, nz, n_p, w0)
-    return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh)
+    theta = theta0 if max_nfev <= 0 else _levenberg_marquardt(resid, theta0, r0, max_iter=max(1, max_nfev // 3))
+    theta = clip(theta)
+    with np.errstate(all="ignore"):   # a diverged start is scored (as NaN), not warned about
+        model = _from_theta(theta[:n_th], nz, n_p, w0)
+        try:
+            yh, levels = sim(theta)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, StopIteration):
+            yh, levels = np.full(y.shape, np.nan), [float("nan")] * len(pieces.bounds)
+    return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh,
+                    shift_of(theta))
 
 
 def _levenberg_marquardt(resid, theta0: np.ndarray, r0: np.ndarray, max_iter: int) -> np.ndarray:
