@@ -54,6 +54,7 @@ from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
                                     fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
+from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
 from hasel.errors import BadInputError, HaselError
@@ -432,6 +433,12 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     say(f"timing offset: output lags the zero-order-hold convention by {out['original_samples']:+.2f} samples "
         f"({1e3 * out['seconds']:+.3g} ms){' (bound reached: kept at 0)' if at_bound else ''}")
     return out
+
+
+#: Candidate families, slowest fit first (measured on the Silverbox log): the order parallel fits start in.
+_SLOW_FIRST = {n: i for i, n in enumerate(("time_delay", "hysteresis", "saturation", "static_nonlinearity",
+                                           "asymmetric_dynamics", "load_mass", "charge_drift",
+                                           "sensor_nonlinearity"))}
 
 
 def _estimate_s(n_work: int, opts: DiagnoseOptions) -> float:
@@ -870,36 +877,50 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     evidence_of: dict[str, tuple] = {}
     ambiguous: list[dict] = []
 
+    def try_one(base: dict[str, EffectFit], name: str) -> tuple | None:
+        """Fit family ``name`` on top of ``base``: (mse_ho, n_params, name, fit, mse_tr, e_ho, effects) or None."""
+        tc = time.perf_counter()
+        fit = fit_family(pipe, base, name)
+        if fit is None:
+            return None
+        if name == "asymmetric_dynamics" and fit.variant == "output":
+            lo_, hi_ = sorted(fit.theta[:2])
+            if hi_ < opts.asym_ratio_min * (lo_ + 0.5 * prep.dt_s):
+                say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
+                return None
+        eff = dict(base)
+        eff[name] = fit
+        m_tr, m_ho, e_new = scores(eff)
+        if identified:
+            try:
+                alt = relinear(base, name, fit)
+            except ValueError:  # a re-identified model the load family makes unstable, say
+                alt = None
+            if alt is not None:
+                a_tr, a_ho, a_e = scores(alt)
+                if a_tr < m_tr:
+                    eff, fit, m_tr, m_ho, e_new = alt, alt[name], a_tr, a_ho, a_e
+        label = " + ".join([k for k in base if k != LINEAR] + [name]) + (" (re-identified)" if LINEAR in eff else "")
+        say(f"  {label:40s} validation NRMSE {to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
+        return (m_ho, fit.n_params, name, fit, m_tr, e_new, eff)
+
+    def try_groups(groups: list[tuple[dict[str, EffectFit], list[str]]]) -> list[list[tuple]]:
+        """:func:`try_all` for several ``(base, names)`` at once, the fits spread over processes
+        (:func:`hasel.diagnose.pool.pmap`, the slowest families first; same results as in series)."""
+        tasks = [(gi, base, n) for gi, (base, names) in enumerate(groups) for n in names]
+        order = sorted(range(len(tasks)), key=lambda i: _SLOW_FIRST.get(tasks[i][2], len(_SLOW_FIRST)))
+        got = dict(zip(order, pmap(lambda i: try_one(tasks[i][1], tasks[i][2]), order)))
+        outs: list[list[tuple]] = [[] for _ in groups]
+        for i, (gi, _, _) in enumerate(tasks):
+            if got[i] is not None:
+                outs[gi].append(got[i])
+        for out in outs:
+            out.sort(key=lambda r: (r[0], r[1]))
+        return outs
+
     def try_all(base: dict[str, EffectFit], names: list[str], inits: dict | None = None) -> list[tuple]:
         """Fit each family on top of ``base``: sorted (mse_ho, n_params, name, fit, mse_tr, e_ho, effects)."""
-        out = []
-        for name in names:
-            tc = time.perf_counter()
-            fit = fit_family(pipe, base, name)
-            if fit is None:
-                continue
-            if name == "asymmetric_dynamics" and fit.variant == "output":
-                lo_, hi_ = sorted(fit.theta[:2])
-                if hi_ < opts.asym_ratio_min * (lo_ + 0.5 * prep.dt_s):
-                    say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
-                    continue
-            eff = dict(base)
-            eff[name] = fit
-            m_tr, m_ho, e_new = scores(eff)
-            if identified:
-                try:
-                    alt = relinear(base, name, fit)
-                except ValueError:  # a re-identified model the load family makes unstable, say
-                    alt = None
-                if alt is not None:
-                    a_tr, a_ho, a_e = scores(alt)
-                    if a_tr < m_tr:
-                        eff, fit, m_tr, m_ho, e_new = alt, alt[name], a_tr, a_ho, a_e
-            out.append((m_ho, fit.n_params, name, fit, m_tr, e_new, eff))
-            label = " + ".join([k for k in base if k != LINEAR] + [name]) + (" (re-identified)" if LINEAR in eff else "")
-            say(f"  {label:40s} validation NRMSE {to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
-        out.sort(key=lambda r: (r[0], r[1]))
-        return out
+        return try_groups([(base, names)])[0]
 
     prior = {n: i for i, n in enumerate(FAMILIES)}
     identified = source.get("source") != "given"
@@ -963,6 +984,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
 
             d_hi = max(fit.theta[0], min(0.2 * pipe.span_s, 5.0 * pipe.t_dom), 2 * prep.dt_s)
             grid = np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, d_hi, 8)]))
+            # the grid's points are independent: in parallel processes (serially inside a worker)
+            cache.update(zip(map(float, grid), pmap(lambda d: (at(d), cache[float(d)])[1], grid)))
             costs = [at(d) for d in grid]
             i = int(np.argmin(costs))
             lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
@@ -1017,9 +1040,9 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
             # pairs among the best single effects, not only those holding the very best: the best
             # single augmentation may be soaking up two effects' signatures
             pool = [r for r in singles[:opts.pair_pool] if r[2] not in current]
-            for i, a in enumerate(pool):
-                results += try_all({**{k: v for k, v in current.items() if _fixed(k, v)}, a[2]: a[3]},
-                                   [b[2] for b in pool[i + 1:]])
+            for got in try_groups([({**{k: v for k, v in current.items() if _fixed(k, v)}, a[2]: a[3]},
+                                     [b[2] for b in pool[i + 1:]]) for i, a in enumerate(pool)]):
+                results += got
             results.sort(key=lambda r: (r[0], r[1]))
             # sequential fits of a pair can lock the first effect into soaking up the second:
             # alternate (refit each given the other) for the most promising pairs, from both
