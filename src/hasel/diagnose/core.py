@@ -1057,8 +1057,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                                 eff = trial
                 return eff
 
-            improved = []
-            for r in results[:opts.pair_alternate]:
+            def improve(r: tuple) -> tuple[float, dict[str, EffectFit]]:
                 names_ = [k for k, v in r[6].items() if not _fixed(k, v)]
                 fixed = {k: v for k, v in r[6].items() if _fixed(k, v)}
                 tries = [alternate(dict(r[6]), names_)]
@@ -1069,7 +1068,11 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                     if fb is not None:
                         tries.append(alternate({**fixed, a: fa, b: fb}, [a, b]))
                 eff = min(tries, key=lambda e: scores(e)[0])
-                improved.append((scores(eff)[0], r, eff))
+                return scores(eff)[0], eff
+
+            # independent of each other: in parallel processes (hasel.diagnose.pool)
+            top = results[:opts.pair_alternate]
+            improved = [(m, r, eff) for r, (m, eff) in zip(top, pmap(improve, top))]
             improved.sort(key=lambda x: x[0])
             for i, (_, r, eff) in enumerate(improved):
                 if i < opts.pair_joint:
