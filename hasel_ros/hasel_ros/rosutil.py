@@ -208,12 +208,18 @@ def _stop_on_signals(wake: Callable[[], None]) -> tuple[dict[str, int], Callable
     old_fd = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
 
     def reader() -> None:
+        try:
+            _read_until_closed()
+        finally:
+            os.close(r)  # here, not in restore(): never under a read still running
+
+    def _read_until_closed() -> None:
         while True:
             try:
                 data = os.read(r, 64)
             except OSError:
                 return
-            if not data:
+            if not data:  # restore() closed the writing end
                 return
             for b in data:  # the byte is the signal number: recorded here too, in case the main thread sleeps
                 if not state["signum"] and b in previous:
@@ -229,8 +235,7 @@ def _stop_on_signals(wake: Callable[[], None]) -> tuple[dict[str, int], Callable
         signal.set_wakeup_fd(old_fd)
         for sig, h in previous.items():
             signal.signal(sig, h if h is not None else signal.SIG_DFL)
-        os.close(w)  # the reader sees end of file and ends
-        os.close(r)
+        os.close(w)  # the reader sees end of file, closes its end and ends
 
     return state, restore
 
