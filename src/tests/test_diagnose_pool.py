@@ -61,3 +61,16 @@ def test_parallel_and_serial_diagnoses_agree(jobs):
     ca = {c["name"]: c["nrmse_validation"] for c in a.rounds[0]["candidates"]}
     cb = {c["name"]: c["nrmse_validation"] for c in b.rounds[0]["candidates"]}
     assert ca.keys() == cb.keys() and all(abs(ca[k] - cb[k]) <= 1e-6 * ca[k] for k in ca)
+
+
+def _in_a_daemon(_: int) -> list[int]:
+    return pool.pmap(lambda i: os.getpid(), range(3))
+
+
+def test_inside_another_pools_worker_it_runs_serially(jobs):
+    import multiprocessing
+
+    jobs(2)
+    with multiprocessing.get_context("spawn").Pool(1) as other:  # as othersim and the benches run diagnoses
+        pids = other.map(_in_a_daemon, [0])[0]
+    assert len(set(pids)) == 1

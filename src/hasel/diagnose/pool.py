@@ -12,8 +12,9 @@ stop a step apart (seen: validation NRMSEs of candidates differing by 1e-6; the 
 of the real datasets and tuning cases are the same, see FAULTS.md).
 
 The number of processes is :func:`jobs` (``--jobs`` of ``hasel diagnose``; default the
-cores this process may run on). Nested calls (a task that maps again) and a single job
-run serially, in order. Platforms without ``fork`` run serially too.
+cores this process may run on). Nested calls (a task that maps again), a single job and
+a diagnosis inside another pool's worker (the benches run one diagnosis per core) run
+serially, in order. Platforms without ``fork`` run serially too.
 """
 from __future__ import annotations
 
@@ -76,7 +77,10 @@ def pmap(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     """
     items = list(items)
     n = min(jobs(), len(items))
-    if n <= 1 or _state["in_worker"] or "fork" not in multiprocessing.get_all_start_methods():
+    if (n <= 1 or _state["in_worker"] or multiprocessing.current_process().daemon
+            or "fork" not in multiprocessing.get_all_start_methods()):
+        # serially: one job, inside a worker of ours, or inside another pool's worker (a daemon may
+        # have no children; the benches already run one diagnosis per core)
         return [fn(x) for x in items]
     ctx = multiprocessing.get_context("fork")
     saved = (_state["fn"], _state["items"])
