@@ -124,3 +124,52 @@ def test_hasel_record_stopped_by_sighup_leaves_a_complete_file(tmp_path):
     assert "stopped by SIGHUP" in stdout and "Traceback" not in err
     n, _ = recorded_kv(out)
     assert n == 0
+
+
+NODE_EXE = ROOT / "install" / "hasel_control" / "lib" / "hasel_control" / "hv_amplifier"
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT", "SIGHUP"])
+def test_a_node_stopped_by_a_signal_commands_0_kv_and_exits_128_plus_the_signal(sig):
+    """The amplifier node run as ``ros2 run`` runs it: a stop signal ends it with its last 0 kV
+    command published (reason SHUTDOWN) and exit code 128 + the signal, like the commands."""
+    import rclpy
+    from rclpy.context import Context
+
+    from hasel_msgs.msg import VoltageCommand
+    from hasel_ros.rosutil import topic_qos
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("stop_probe", context=ctx)
+    got: list = []
+    node.create_subscription(VoltageCommand, "/amp/applied", got.append, topic_qos("/amp/applied"))
+    pub = node.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    proc = subprocess.Popen([str(NODE_EXE)], env=dict(os.environ),
+                            preexec_fn=default_sigint, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not any(m.applied_kv > 1.0 for m in got) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            pub.publish(VoltageCommand(requested_kv=3.0))  # the node holds 3 kV
+            ex.spin_once(timeout_sec=0.05)
+        assert got and got[-1].applied_kv == pytest.approx(3.0), "the amplifier never applied 3 kV"
+        proc.send_signal(getattr(signal, sig))
+        end = time.monotonic() + 30
+        while proc.poll() is None and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        for _ in range(20):  # what was on its way
+            ex.spin_once(timeout_sec=0.05)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 128 + getattr(signal, sig), err
+    assert "Traceback" not in err and f"stopped by {sig}" in err.splitlines()[-1]
+    last = got[-1]
+    assert last.applied_kv == 0.0 and last.reason == VoltageCommand.REASON_SHUTDOWN

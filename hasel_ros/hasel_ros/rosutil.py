@@ -181,44 +181,129 @@ def diagnostic(node: Node, level: bytes, message: str, t_s: float, **values: Any
     return arr
 
 
+def _stop_on_signals(wake: Callable[[], None]) -> tuple[dict[str, int], Callable[[], None]]:
+    """Handle SIGINT (unless inherited as ignored), SIGTERM and SIGHUP alike for a node's main.
+
+    rclpy's own handlers would shut the context down inside the signal, so a node's
+    ``on_shutdown`` could no longer publish (the amplifier's last 0 kV) and the exit code
+    would not say which signal came. Here a signal is only recorded; the signal module's
+    wake-up descriptor, written by the C-level handler whatever the main thread is doing,
+    is read by a small thread that calls ``wake`` (a guard condition of the executor), so a
+    spin blocked in the middleware returns at once. Returns the state (``signum``, 0 until a
+    signal arrives) and a function that puts everything back.
+    """
+    import os
+    import signal
+    import threading
+
+    state = {"signum": 0}
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+
+    def handler(signum: int, frame) -> None:
+        del frame
+        if not state["signum"]:
+            state["signum"] = int(signum)
+
+    previous = {}
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is None or (sig == signal.SIGINT and signal.getsignal(sig) == signal.SIG_IGN):
+            continue  # started in a script's background: SIGINT stays ignored, as the shell meant
+        previous[sig] = signal.signal(sig, handler)
+    old_fd = signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+
+    def reader() -> None:
+        try:
+            _read_until_closed()
+        finally:
+            os.close(r)  # here, not in restore(): never under a read still running
+
+    def _read_until_closed() -> None:
+        while True:
+            try:
+                data = os.read(r, 64)
+            except OSError:
+                return
+            if not data:  # restore() closed the writing end
+                return
+            for b in data:  # the byte is the signal number: recorded here too, in case the main thread sleeps
+                if not state["signum"] and b in previous:
+                    state["signum"] = int(b)
+            try:
+                wake()
+            except Exception:  # noqa: BLE001 - the guard condition may be gone at exit
+                return
+
+    threading.Thread(target=reader, name="hasel-stop-signals", daemon=True).start()
+
+    def restore() -> None:
+        signal.set_wakeup_fd(old_fd)
+        for sig, h in previous.items():
+            signal.signal(sig, h if h is not None else signal.SIG_DFL)
+        os.close(w)  # the reader sees end of file, closes its end and ends
+
+    return state, restore
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """Standard Jazzy main: init, spin one node, clean shutdown on Ctrl-C, SIGTERM or SIGHUP.
+    """Standard Jazzy main: init, spin one node, clean shutdown on SIGINT, SIGTERM or SIGHUP.
+
+    A stop signal ends the spin; the node's ``on_shutdown`` then runs while the ROS context
+    is still valid (the amplifier commands 0 kV, the recorder closes its file), the node is
+    destroyed, and the exit code is 128 + the signal number, as for the ``hasel`` commands
+    (:mod:`hasel.interrupt`). SIGINT stays ignored when the node was started with it ignored
+    (in a script's background).
 
     A bad parameter at start (out of range, wrong type, unsafe, unparsable ``--ros-args``)
     is one line on stderr and exit code 2; the node is never built, so nothing is commanded.
     """
-    import signal
-
     from rclpy.exceptions import ParameterException
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     from hasel.errors import BadInputError
 
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as err:  # noqa: BLE001 - e.g. RCLError for a malformed -p NAME:=VALUE
         sys.stderr.write(f"error: bad arguments: {str(err).splitlines()[0] if str(err) else type(err).__name__}\n")
         return 2
-    if hasattr(signal, "SIGHUP"):  # a closed terminal stops the node as SIGTERM does (rclpy handles that)
-        signal.signal(signal.SIGHUP, lambda *_: signal.raise_signal(signal.SIGTERM))
+    wake_gc: list = []
+    stop, restore = _stop_on_signals(lambda: [g.trigger() for g in wake_gc])
     node = None
+    executor = None
+    code = 0
     try:
         node = factory()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        wake_gc.append(node.create_guard_condition(lambda: None))
+        while rclpy.ok() and not stop["signum"]:
+            executor.spin_once(timeout_sec=0.5)  # the guard condition wakes it at a signal; 0.5 s is a backstop
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (BadInputError, ParameterException) as err:  # a start-up error is one line, not a traceback
         sys.stderr.write(f"error: {err}\n")
-        return 2
-    except Exception as err:  # noqa: BLE001 - a signal during start-up invalidates the context
-        if not rclpy.ok():
-            return 0  # stopped (SIGINT/SIGTERM/SIGHUP) before the node was up: nothing was commanded
-        sys.stderr.write(f"error: {type(err).__name__}: {err}\n")
-        return 1
+        code = 2
+    except Exception as err:  # noqa: BLE001 - a real failure: one line, exit 1
+        if not stop["signum"]:
+            sys.stderr.write(f"error: {type(err).__name__}: {err}\n")
+            code = 1
     finally:
+        wake_gc.clear()
         if node is not None:
             shutdown = getattr(node, "on_shutdown", None)
             if shutdown is not None:
-                shutdown()
+                shutdown()  # context still valid: the last command (0 kV) goes out, files close
+            if executor is not None:
+                executor.remove_node(node)
             node.destroy_node()
+        restore()
         rclpy.try_shutdown()
-    return 0
+    if stop["signum"] and code != 2:
+        import signal
+
+        sys.stderr.write(f"stopped by {signal.Signals(stop['signum']).name}\n")
+        return 128 + stop["signum"]
+    return code

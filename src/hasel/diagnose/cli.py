@@ -4,7 +4,10 @@ Loads the log (``.mcap``, ``.csv`` or ``.mat`` through :func:`hasel.io.load_io`,
 the same ``--time/--input/--output`` options as ``hasel identify``), diagnoses the gap
 to the nominal model (:func:`hasel.diagnose.diagnose`) and writes VERDICT.json, the
 held-out simulations (``--export-sim``: columns ``t_s, measured, nominal,
-augmented``) and a report. Progress goes to stderr, a summary to stdout.
+augmented``) and a report. A summary goes to stdout; progress (with an estimate of the
+whole time) to a status line on stderr when it is a terminal, as lines with ``--progress``
+(see :class:`Progress`). ``--jobs`` sets the processes of the candidate fits
+(:mod:`hasel.diagnose.pool`).
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ import numpy as np
 from hasel.errors import BadInputError
 from hasel.outputs import json_safe
 
-__all__ = ["add_arguments", "run", "json_safe"]
+__all__ = ["add_arguments", "run", "json_safe", "Progress"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,6 +49,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="working rate, Hz (default: about 25 times the input's band)")
     p.add_argument("--max-effects", type=int, default=3, metavar="N", help="most effects named (default 3)")
     p.add_argument("--export-plant", metavar="FILE.json", help="write the augmented model as a plant-model file")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="processes for the candidate fits (default: the cores available; 1: serial)")
+    p.add_argument("--progress", action="store_true",
+                   help="progress as lines on stderr even when it is not a terminal (by default a terminal gets "
+                        "one status line, cleared at the end, and a script none: a late error stays alone)")
 
 
 def _write_atomic(path: str, text: str) -> None:
@@ -78,14 +86,70 @@ def _units(data: Any) -> tuple[str, str]:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``hasel diagnose``; return the exit code (bad input raises :class:`BadInputError`)."""
+    from hasel.diagnose.pool import set_jobs
+
+    if getattr(args, "jobs", None) is not None and args.jobs < 1:
+        raise BadInputError(f"--jobs must be >= 1, got {args.jobs}")
+    set_jobs(getattr(args, "jobs", None))
+    say = Progress(sys.stderr, lines=bool(getattr(args, "progress", False)))
+    try:
+        return _run(args, say)
+    finally:
+        say.close()  # the status line goes before anything else is written (an error, the summary)
+        set_jobs(None)
+
+
+class Progress:
+    """Where ``hasel diagnose`` says what it is doing (a callable taking one message).
+
+    On a terminal: one status line rewritten in place (the command, the step, the seconds
+    so far and the estimate of the whole), cleared by :meth:`close`, so that an error found
+    late is the only line left on stderr (the promise of exit code 2) and the summary on
+    stdout follows a clean line. ``lines=True`` (``--progress``): every message as its own
+    line, terminal or not. Otherwise (a script, a pipe): nothing.
+    """
+
+    def __init__(self, stream, lines: bool = False) -> None:
+        self.stream, self.t0 = stream, time.perf_counter()
+        self.lines = lines
+        try:
+            self.status = not lines and bool(stream.isatty())
+        except (AttributeError, ValueError):
+            self.status = False
+        self.estimate = ""
+        self.shown = False
+
+    def __call__(self, msg: str) -> None:
+        """Show ``msg`` (with the seconds since the start)."""
+        if msg.startswith("estimate:"):
+            self.estimate = "; " + msg.split("(")[0].strip()  # kept on the status line from now on
+        seconds = f"{time.perf_counter() - self.t0:.1f} s"
+        if self.lines:
+            self.stream.write(f"hasel diagnose: {msg} ({seconds})\n")
+        elif self.status:
+            text = f"hasel diagnose: {msg} ({seconds}{'' if msg.startswith('estimate:') else self.estimate})"
+            import shutil
+
+            width = max(20, shutil.get_terminal_size((100, 20)).columns - 1)
+            text = text if len(text) <= width else text[:width - 3] + "..."
+            self.stream.write("\r" + text + "\033[K")
+            self.shown = True
+        else:
+            return
+        self.stream.flush()
+
+    def close(self) -> None:
+        """Clear the status line (on a terminal)."""
+        if self.shown:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+            self.shown = False
+
+
+def _run(args: argparse.Namespace, say: Progress) -> int:
+    """``hasel diagnose`` proper, telling its progress to ``say``."""
     from hasel.diagnose.core import DiagnoseOptions, DiagnosisFailed, diagnose
     from hasel.io import load_io
-
-    t0 = time.perf_counter()
-
-    def say(msg: str) -> None:
-        sys.stderr.write(f"hasel diagnose: {msg} ({time.perf_counter() - t0:.1f} s)\n")
-        sys.stderr.flush()
 
     if args.max_effects < 0:
         raise BadInputError(f"--max-effects must be >= 0, got {args.max_effects}")
@@ -132,6 +196,7 @@ def run(args: argparse.Namespace) -> int:
         say(f"wrote {path}")
     from hasel.diagnose.report import verdict_lines
 
+    say.close()
     for line in verdict_lines(v, units):
         print(line)
     return 0

@@ -115,20 +115,25 @@ def lag(y: np.ndarray, dt: float, theta: tuple[float, ...], y_c: float, y_s: flo
     if k == 0.0:
         return asymmetric_lag(y, dt, tau_up, tau_dn, z)
     a_up = 1.0 if tau_up <= 0 else -math.expm1(-dt / tau_up)
-    out = [0.0] * y.size
+    # a per-sample recursion (the direction depends on the state): the loop is kept lean, appending
+    # to a list and branching on the clip, with the same arithmetic in the same order
+    out: list[float] = []
+    append = out.append
     inv = 1.0 / y_s
     exp = math.exp
-    for i, xi in enumerate(y.tolist()):
+    for xi in y.tolist():
         d = xi - z
         if d > 0.0:
             z += d * a_up
         else:
             w = (z - y_c) * inv
-            w = 2.0 if w > 2.0 else (-2.0 if w < -2.0 else w)
-            tau = tau_dn * exp(k * w)
-            z += d * (dt / (tau + dt))
-        out[i] = z
-    return np.asarray(out)
+            if w > 2.0:
+                w = 2.0
+            elif w < -2.0:
+                w = -2.0
+            z += d * (dt / (tau_dn * exp(k * w) + dt))
+        append(z)
+    return np.array(out, dtype=float)
 
 
 class LagStage:

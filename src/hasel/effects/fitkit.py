@@ -193,14 +193,17 @@ def _poly_ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, degrees=(1
     scale = np.sqrt(np.sum(A * A, axis=0))
     scale[scale == 0] = 1.0
     An = A / scale
+    # the two halves' rows, taken out once (not at each of the six solves below)
+    parts = {True: (An[ha], r[ha]), False: (An[~ha], r[~ha]), None: (An, r)}
 
-    def solve(cols_: slice, rows: np.ndarray) -> np.ndarray:
+    def solve(cols_: slice, rows: bool | None) -> np.ndarray:
         # a little ridge on the unit-norm columns: monomials of high degree are nearly
         # collinear, and unregularised they trade huge coefficients of opposite signs
-        M = An[rows][:, cols_]
+        M = parts[rows][0][:, cols_]
         k = M.shape[1]
-        lam = POLY_RIDGE * float(np.trace(M.T @ M)) / k
-        return np.linalg.solve(M.T @ M + lam * np.eye(k), M.T @ r[rows])
+        MtM = M.T @ M
+        lam = POLY_RIDGE * float(np.trace(MtM)) / k
+        return np.linalg.solve(MtM + lam * np.eye(k), M.T @ parts[rows][1])
 
     # two held levels (a step) cannot tell an affine map from a gain change of the linear
     # part: the map keeps only its offset then (a gain change is the load family's)
@@ -210,13 +213,14 @@ def _poly_ls(pipe: Pipeline, effects: dict[str, EffectFit], basis_fn, degrees=(1
         for d in degrees:
             c = slice(0, d + 1)
             cv = 0.0
-            for tr, te in ((ha, ~ha), (~ha, ha)):
-                e = r[te] - An[te][:, c] @ solve(c, tr)
+            for tr in (True, False):
+                M_te, r_te = parts[not tr]
+                e = r_te - M_te[:, c] @ solve(c, tr)
                 cv += sumsq(e)
             if cv < best_cv * (1 - 1e-3):
                 best_d, best_cv = d, cv
     c = slice(0, best_d + 1)
-    return solve(c, np.ones(r.size, bool)) / scale[c]
+    return solve(c, None) / scale[c]
 
 
 

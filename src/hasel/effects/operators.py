@@ -171,16 +171,18 @@ def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: floa
     xs = np.asarray(x, float)
     a_up = 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
     z = float(xs[0]) if z0 is None else float(z0)
-    out = [0.0] * xs.size
+    # a per-sample recursion (the direction depends on the state): lean loops, appending to a list
+    out: list[float] = []
+    append = out.append
     if level_dependence == 0.0:
         a_dn = 1.0 if tau_down_s <= 0 else -math.expm1(-dt_s / tau_down_s)
-        for i, xi in enumerate(xs.tolist()):
+        for xi in xs.tolist():
             d = xi - z
             z += d * (a_up if d > 0.0 else a_dn)
-            out[i] = z
+            append(z)
     else:
         inv_ref = 1.0 / level_ref
-        for i, xi in enumerate(xs.tolist()):
+        for xi in xs.tolist():
             d = xi - z
             if d > 0.0:
                 z += d * a_up
@@ -188,8 +190,8 @@ def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: floa
                 g = 1.0 - z * inv_ref
                 tau = tau_down_s * (1.0 + level_dependence * (g if g > 0.0 else 0.0))
                 z += d * (dt_s / (tau + dt_s) if tau > 0 else 1.0)
-            out[i] = z
-    return np.asarray(out)
+            append(z)
+    return np.array(out, dtype=float)
 
 
 def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:
