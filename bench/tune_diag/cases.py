@@ -65,15 +65,16 @@ def _simulate(u: np.ndarray, rate: float, effs: list[F], plant: tuple | None) ->
 DP = "double_pole"
 
 
-#: name -> (list of effect makers, voltage clip kV or None); a double-pole load is the marker DP
+#: name -> (list of effect makers, voltage clip kV or None, or minus the share of samples clipped);
+#: a double-pole load is the marker (DP, drop)
 def _spec(kind: str, rng: np.random.Generator) -> tuple[list, float | None]:
     s = o.sample_foreign
     if kind.startswith("dpole"):
         rest = {"dpole_load": [], "dpole_load_drift": [s("charge_drift", rng)],
                 "dpole_triple": [s("hysteresis", rng), s("sensor_nonlinearity", rng)]}[kind]
         return [(DP, float(rng.uniform(0.15, 0.30)))] + rest, None
-    if kind == "voltage_clip_high":
-        return [], float(rng.uniform(6.2, 6.7))
+    if kind == "voltage_clip_high":  # a clip that only the highest 0.5-2 % of the command reach
+        return [], -float(rng.uniform(0.005, 0.02))
     if kind == "pole_load":
         return [_pole_load(rng)], None
     if kind == "voltage_clip":
@@ -102,8 +103,11 @@ KINDS = ("pole_load", "pole_load", "pole_load", "voltage_clip", "voltage_clip", 
 FREE = 8
 
 
-def make(directory: str, seed: int = 7) -> list[dict]:
-    """Write every case's file to ``directory``; returns their labels (kept here, not in the files)."""
+def make(directory: str, seed: int = 7, n_free: int = FREE, free_s: float | None = 20.0) -> list[dict]:
+    """Write every case's file to ``directory``; returns their labels (kept here, not in the files).
+
+    ``n_free`` effect-free logs of :data:`hasel.othersim.FREE_DESIGNS` in turn, ``free_s`` long
+    (None: othersim's own lengths, 40 s up to 1 kHz, 20 s above)."""
     out = []
     for i, kind in enumerate(KINDS):
         rng = np.random.default_rng([seed, i])
@@ -112,6 +116,8 @@ def make(directory: str, seed: int = 7) -> list[dict]:
         effs = [x for x in spec if not isinstance(x, tuple)]
         rate = [500.0, 1000.0][int(rng.integers(2))]
         u, _ = o.excitation(rng, rate)
+        if vclip is not None and vclip < 0:  # a share of samples to clip, not a level
+            vclip = float(np.quantile(u, 1.0 + vclip))
         u_act = np.minimum(u, vclip) if vclip is not None else u
         z = _simulate(u_act, rate, effs, plant)
         noise = float(rng.uniform(0.003, 0.012))
@@ -125,9 +131,9 @@ def make(directory: str, seed: int = 7) -> list[dict]:
                     "truth": [f"{e.name}:{e.kind}:{e.params}" for e in effs]
                     + [f"double pole lowered {100 * x[1]:.0f} %" for x in spec if isinstance(x, tuple)]
                     + ([f"voltage clip {vclip:.2f} kV"] if vclip is not None else [])})
-    for j in range(FREE):
+    for j in range(n_free):
         c = o.make_free_case(100 + j, seed * 1000 + j, directory, design=o.FREE_DESIGNS[j % len(o.FREE_DESIGNS)],
-                             duration_s=20.0)
+                             duration_s=free_s)
         out.append({"path": c.path, "kind": f"free:{c.design}:{c.rate_hz:g}:{c.convention}:{c.noise}",
                     "labels": [], "truth": []})
     return out
@@ -181,9 +187,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True)
     p.add_argument("--only", default="", help="comma-separated substrings of case kinds to run")
     p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--free", type=int, default=FREE, help="effect-free logs (default %(default)s)")
+    p.add_argument("--free-s", type=float, default=20.0, help="their length, s (0: othersim's own)")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
-    cases = make(a.out, a.seed)
+    cases = make(a.out, a.seed, a.free, a.free_s or None)
     if a.only:
         keys = a.only.split(",")
         cases = [c for c in cases if any(k in c["kind"] for k in keys)]
