@@ -166,6 +166,13 @@ class DiagnoseOptions:
         member of a pair was lost although the residual was 23x the floor's energy
         (``bench/tune_diag``, load + drift). Now 0: an effect that removes most of what is left
         and passes the held-out test is named whatever its share of the nominal gap.
+    stop_share, stop_over_floor : float
+        No further round once what is left above the floor is below ``stop_share`` of the
+        nominal gap *and* the validation error is within ``stop_over_floor`` times the
+        floor's energy [for time, tune_diag]: without it, every case whose first effect left
+        a residual just above ``floor_margin`` ran a second round with pairs (a voltage clip
+        case: 8 s -> 66 s), while a real second effect left after a large first one (load +
+        drift: 23x the floor's energy) still gets its round.
     clip_share_min : float
         When the measured output piles up on its extreme (a clip, see
         :func:`hasel.diagnose.prep.flat_extremes`) and the selected model predicts beyond
@@ -227,6 +234,8 @@ class DiagnoseOptions:
     min_nominal_share: float = 0.03
     near_all_gain: float = 0.5
     min_nominal_share_near_all: float = 0.0
+    stop_share: float = 0.008
+    stop_over_floor: float = 2.0
     clip_share_min: float = 0.1
     repeat_over_noise_min: float = 1.5
     repeat_share_min: float = 0.3
@@ -495,9 +504,11 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
     sse, kappa = cost(mu)
     sse0 = estimate_timing(LinearSim(num, den, prep.rate_hz, 0.0).run_start(u), y, use, lo, hi)[1]
     n = int(use.sum())
-    # kept only when the two parameters pay for themselves (BIC, noise variance unknown): on an
-    # effect-free log the shift is then the nominal model's, as before
-    if sse > 0 and sse0 > sse and n * math.log(sse0 / sse) > 2.0 * math.log(max(n, 2)):
+    # kept only when the two parameters pay for themselves (BIC, noise variance unknown; on an
+    # effect-free log the shift is then the nominal model's, as before) and the gap is mostly
+    # load-like (at least half its energy: a large clip's gap, which a load fits only in part,
+    # pushed the shift to its bound)
+    if sse > 0 and sse < 0.5 * sse0 and n * math.log(sse0 / sse) > 2.0 * math.log(max(n, 2)):
         return mu, kappa
     return 0.0, 1.0
 
@@ -1302,8 +1313,10 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
         if rnd > 0 and ctx.to_nrmse(st.mse_ho) <= opts.floor_margin * ctx.floor_va:
             ctx.say("at the noise floor: no further effect")
             break
-        if rnd > 0 and st.mse_ho - ctx.sigma2 < (min(opts.min_nominal_share, opts.min_nominal_share_near_all)
-                                                 * (st.mse_nom - ctx.sigma2)):
+        if rnd > 0 and (st.mse_ho - ctx.sigma2 < (min(opts.min_nominal_share, opts.min_nominal_share_near_all)
+                                                  * (st.mse_nom - ctx.sigma2))
+                        or (st.mse_ho - ctx.sigma2 < opts.stop_share * (st.mse_nom - ctx.sigma2)
+                            and st.mse_ho < opts.stop_over_floor * ctx.sigma2)):
             ctx.say("what is left is too small a share of the nominal gap for any further effect")
             break
         results = _fit_candidates(ctx, st.current, [f for f in FAMILIES if f not in st.current][:max(opts.top_k, 1)])
