@@ -56,7 +56,7 @@ from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pip
                                     fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
-from hasel.effects.load import loaded_den
+from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
 from hasel.errors import BadInputError, HaselError
 
 __all__ = ["DiagnoseOptions", "Verdict", "DiagnosisFailed", "diagnose", "block_test", "coloured_z"]
@@ -412,7 +412,7 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
 
 
 def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float, say,
-                 exclude: np.ndarray | None = None) -> dict:
+                 exclude: np.ndarray | None = None, nuisance_load: bool = True) -> dict:
     """Estimate the output sampling point as a nuisance (a timing offset) and set it in ``prep``.
 
     The nominal simulation holds the input over each working interval and takes the output
@@ -429,7 +429,9 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     the shift is fitted jointly with a nuisance load (:func:`_load_nuisance`: the resonances'
     inertia and the gain, the ``load_mass`` family's form), which is not kept: whether a load
     is there is for the selection to say. A time delay fitted later that stays within one
-    original sample is folded back into the shift (see :func:`_timing_fold`).
+    original sample is folded back into the shift (see :func:`_timing_fold`). Not for a model
+    identified from the same log (``nuisance_load`` False): it has no load to miss, and a
+    nuisance load there took part of the DC motor's dead time into the shift.
 
     Returns the ``timing_offset`` entry of the verdict (output lag behind the zero-order
     hold convention, in seconds and original samples; positive: the output lags).
@@ -442,7 +444,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     r0 = prep.records[0]
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
-    mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi)
+    mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi) if nuisance_load else (0.0, 1.0)
     ys = kappa * LinearSim(num, loaded_den(den, mu), prep.rate_hz, 0.0).run_start(u)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
@@ -510,7 +512,11 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
     # effect-free log the shift is then the nominal model's, as before. Not only when the gap is
     # mostly load-like: beside a large drift (load + drift tuning cases) the load is a small part
     # of the gap and its phase still biased the shift (the load was then lost)
-    if sse > 0 and sse0 > sse and n * math.log(sse0 / sse) > 2.0 * math.log(max(n, 2)):
+    # And only a load that moves the resonance by 5 % or more (``|mu| >= 0.1``): a smaller one biases
+    # the shift by little, and one fitted to a sampling convention on an effect-free log (mu 0.017)
+    # left the load's own residual for the selection to name
+    if (abs(mu) >= LOAD_SAG_MIN_MU and sse > 0 and sse0 > sse
+            and n * math.log(sse0 / sse) > 2.0 * math.log(max(n, 2))):
         return mu, kappa
     return 0.0, 1.0
 
@@ -849,7 +855,8 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
     """Stage: the linear model (identified without clipped samples when none is given), the timing
     offset (set in ``prep``) and the measured clips. Returns ``num, den, source, timing, clips``."""
     clips = flat_extremes(prep.records[0].y)
-    if num is None:
+    given = num is not None
+    if not given:
         prep_id = prep
         if clips:
             # clipped samples only bound the output: identify the linear model without them
@@ -860,7 +867,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
                 f"({int(at.sum())} samples, a clip): identifying without them")
         num, den, source = _identify(prep_id, opts, say)
     clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
-    timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped)
+    timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
     return num, den, source, timing, clips
 
 
