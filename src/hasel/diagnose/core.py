@@ -58,6 +58,7 @@ from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
+from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
 from hasel.errors import BadInputError, HaselError
 
 __all__ = ["DiagnoseOptions", "Verdict", "DiagnosisFailed", "diagnose", "block_test", "coloured_z"]
@@ -80,7 +81,10 @@ class DiagnoseOptions:
     """Settings of :func:`diagnose`, each with how it was set and on which data.
 
     Provenance key: **[blind]** tuned on the project's own blind check
-    (:mod:`hasel.diagnose.blind`, the effect library's forms); **[other]** checked on the
+    (:mod:`hasel.diagnose.blind`, the effect library's forms, its default run);
+    **[tune_diag]** checked on ``bench/tune_diag/cases.py`` (seed 7: pole-shift loads of one
+    and of both resonance pairs, voltage clips, load + drift, slew + lag, triples, effect-free
+    logs; built on :mod:`hasel.othersim`); **[other]** checked on the
     independent simulator's effect cases (:mod:`hasel.othersim`, ``run_othersim`` seed 0, 28
     cases); **[free]** calibrated on its effect-free logs of several designs
     (:func:`hasel.othersim.make_free_case`: paper protocol, chirp, multisine, PRBS and
@@ -129,7 +133,11 @@ class DiagnoseOptions:
     min_gap_share : float
         Share of the validation residual energy *above the noise floor* it must remove [blind].
     floor_margin : float
-        No further effect once the validation NRMSE is within this factor of the floor [blind].
+        No further effect once the validation NRMSE is within this factor of the floor [blind];
+        the first round runs whatever the NRMSE [tune_diag]: a clip of the highest 0.5-2 % of
+        the commands left the whole log's validation NRMSE at the floor (0.0018 against 0.0018)
+        while its final part stood at twice it, and the clip, once fitted, passed the
+        coloured-noise test (z 4.8) and brought the final part to the floor.
     z_min : float
         Paired z statistic of the validation improvement with white noise of the floor's
         variance [blind]; kept for the repeat and clip checks beside ``t_min`` (it assumes
@@ -142,9 +150,9 @@ class DiagnoseOptions:
         In the second round, pairs among this many best single effects are fitted too. [blind]
     pair_alternate : int
         The most promising pairs whose two fits are alternated (each refitted given the
-        other), from both orders.
+        other), from both orders [blind, for time].
     pair_joint : int
-        Of those, the best few (by training error) refined jointly before the choice.
+        Of those, the best few (by training error) refined jointly before the choice [blind, for time].
     pair_joint_nfev : int
         Iterations of that refinement. [blind, for time]
     swap_ratio : float
@@ -153,7 +161,20 @@ class DiagnoseOptions:
     min_nominal_share : float
         Share of the nominal model's validation gap above the floor each effect must remove. [blind]
     near_all_gain, min_nominal_share_near_all : float
-        ...unless it removes at least ``near_all_gain`` of what is left, then this smaller share. [blind]
+        ...unless it removes at least ``near_all_gain`` of what is left, then this smaller share
+        [blind, tune_diag]. It was 0.008: after a large first effect (a drift removing 99.6 % of
+        the nominal gap) a real second one (a load, removing 53 % of what was left, block score
+        5.8, coloured z 38) is a far smaller share of the nominal gap than that, so the smaller
+        member of a pair was lost although the residual was 23x the floor's energy
+        (``bench/tune_diag``, load + drift). Now 0: an effect that removes most of what is left
+        and passes the held-out test is named whatever its share of the nominal gap.
+    stop_share, stop_over_floor : float
+        No further round once what is left above the floor is below ``stop_share`` of the
+        nominal gap *and* the validation error is within ``stop_over_floor`` times the
+        floor's energy [for time, tune_diag]: without it, every case whose first effect left
+        a residual just above ``floor_margin`` ran a second round with pairs (a voltage clip
+        case: 8 s -> 66 s), while a real second effect left after a large first one (load +
+        drift: 23x the floor's energy) still gets its round.
     clip_share_min : float
         When the measured output piles up on its extreme (a clip, see
         :func:`hasel.diagnose.prep.flat_extremes`) and the selected model predicts beyond
@@ -168,14 +189,16 @@ class DiagnoseOptions:
         (``z_min`` significant) and, with the other effects refitted beside it, the
         validation error grows by at most that ratio. [blind]
     joint_refine : bool
-        Refine all chosen effects' parameters together at the end.
+        Refine all chosen effects' parameters together at the end [design]; kept only when the
+        validation error does not grow.
     joint_refine_nfev : int
-        Iterations of that refinement.
+        Iterations of that refinement [for time; not tuned].
     identify : {"auto", "internal", "ident"}
         Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
-        else the internal output-error fit.
+        else the internal output-error fit [design: "auto" keeps the one whose simulation
+        fits the training samples better].
     target_rate_hz : float or None
-        Force the working rate.
+        Force the working rate [user choice; None: the lowest rate the model's band allows].
     n_blocks : int
         Interleaved blocks of a self-held-out split. [design]
     max_samples : int
@@ -185,7 +208,7 @@ class DiagnoseOptions:
     max_order : int
         Largest order of the internal linear fit. [design]
     progress : callable or None
-        Called with one-line progress messages (e.g. ``print`` to stderr).
+        Called with one-line progress messages (e.g. ``print`` to stderr) [user choice].
     """
 
     max_effects: int = 3
@@ -202,7 +225,9 @@ class DiagnoseOptions:
     false_alarm_note: str = ("an effect is named only if it passes a held-out test calibrated on 24 effect-free "
                              "logs of five designs (chirp, multisine, PRBS, paper protocol, closed loop; white, "
                              "coloured noise, sensor wander; 200 Hz-5 kHz; ZOH, FOH, centred, fractional offsets): "
-                             "false alarms there 0 of 24 (95 % upper bound 12 %); at most 5 % is the target")
+                             "false alarms there 0 of 24, and 1 of 20 further such logs (bench/tune_diag, seed 11: a "
+                             "200 Hz closed-loop log, named static_nonlinearity): 1 of 44, 2 % (95 % upper bound "
+                             "10 %); at most 5 % is the target")
     asym_ratio_min: float = 2.0
     top_k: int = 8
     pair_pool: int = 5
@@ -212,7 +237,9 @@ class DiagnoseOptions:
     swap_ratio: float = 0.97
     min_nominal_share: float = 0.03
     near_all_gain: float = 0.5
-    min_nominal_share_near_all: float = 0.008
+    min_nominal_share_near_all: float = 0.0
+    stop_share: float = 0.008
+    stop_over_floor: float = 2.0
     clip_share_min: float = 0.1
     repeat_over_noise_min: float = 1.5
     repeat_share_min: float = 0.3
@@ -387,7 +414,7 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
 
 
 def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float, say,
-                 exclude: np.ndarray | None = None) -> dict:
+                 exclude: np.ndarray | None = None, nuisance_load: bool = True) -> dict:
     """Estimate the output sampling point as a nuisance (a timing offset) and set it in ``prep``.
 
     The nominal simulation holds the input over each working interval and takes the output
@@ -398,9 +425,15 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     also a nuisance). A shift that reaches the bound is not a convention but a lag: the
     convention is then kept and a time delay is left to be found as an effect.
 
-    The shift is estimated on the nominal model alone, so a linear change of the system (a
-    load's phase near the resonance) biases it by up to the bound; a time delay fitted later
-    that stays within one original sample is folded back into it (see :func:`diagnose`).
+    A linear change of the system (a load's phase near the resonance) would bias a shift fitted
+    on the nominal model alone by up to the bound (on the tuning logs a 17 % lower double pole
+    moved it by 0.84 of a sample, and the load was then fitted against the wrong timing); so
+    the shift is fitted jointly with a nuisance load (:func:`_load_nuisance`: the resonances'
+    inertia and the gain, the ``load_mass`` family's form), which is not kept: whether a load
+    is there is for the selection to say. A time delay fitted later that stays within one
+    original sample is folded back into the shift (see :func:`_timing_fold`). Not for a model
+    identified from the same log (``nuisance_load`` False): it has no load to miss, and a
+    nuisance load there took part of the DC motor's dead time into the shift.
 
     Returns the ``timing_offset`` entry of the verdict (output lag behind the zero-order
     hold convention, in seconds and original samples; positive: the output lags).
@@ -410,11 +443,11 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     q = prep.decimation
     a0 = prep.sample_offset
     lo, hi = max(-1.0, a0 - 1.0 / q), min(1.0, a0 + 1.0 / q)
-    sim = LinearSim(num, den, prep.rate_hz, 0.0)
     r0 = prep.records[0]
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
-    ys = sim.run_start(u)
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
+    mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi) if nuisance_load else (0.0, 1.0)
+    ys = kappa * LinearSim(num, loaded_den(den, mu), prep.rate_hz, 0.0).run_start(u)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
     at_bound = min(a - lo, hi - a) < 0.02 / q
@@ -431,9 +464,63 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
         out["note"] = ("the best shift reached one original sample: not a sampling convention but a lag; the "
                        "zero-order-hold convention is kept and any delay is left to the time_delay effect")
         out["seconds"] = out["original_samples"] = 0.0
+    out["fitted_beside"] = {"load_mass_ratio": mu, "gain_factor": kappa,
+                            "note": "a nuisance load fitted with the shift so that a changed resonance's phase is "
+                                    "not read as timing; not part of the model"}
     say(f"timing offset: output lags the zero-order-hold convention by {out['original_samples']:+.2f} samples "
         f"({1e3 * out['seconds']:+.3g} ms){' (bound reached: kept at 0)' if at_bound else ''}")
     return out
+
+
+def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarray, use: np.ndarray,
+                   lo: float, hi: float) -> tuple[float, float]:
+    """The inertia factor ``mu`` of the model's resonances and the gain ``kappa`` that, with the best
+    output sampling shift in ``[lo, hi]`` (working samples) and an output offset, fit the first
+    record's training samples ``use`` best (``mu`` in [-0.6, 3]; ``(0, 1)`` when nothing is gained).
+
+    Each trial is one linear simulation: a grid of ``mu`` then a bounded scalar search, ``kappa``
+    by least squares at each shift's side."""
+    from hasel.diagnose.prep import LinearSim, at_offset, estimate_timing
+
+    y = prep.records[0].y
+
+    def cost(mu: float) -> tuple[float, float]:
+        try:
+            ys = LinearSim(num, loaded_den(den, float(mu)), prep.rate_hz, 0.0).run_start(u)
+        except (BadInputError, ValueError, np.linalg.LinAlgError):
+            return float("inf"), 1.0
+        a, _ = estimate_timing(ys, y, use, lo, hi)
+        m = at_offset(ys, a)[use]
+        mc, yc = m - m.mean(), y[use] - y[use].mean()
+        k = float(mc @ yc / max(mc @ mc, 1e-300))
+        if not 0.2 <= k <= 5.0:
+            return float("inf"), 1.0
+        _, sse = estimate_timing(k * ys, y, use, lo, hi)
+        return sse, k
+
+    grid = np.array([-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.5, 0.8, 1.2, 2.0])
+    costs = [cost(m)[0] for m in grid]
+    i = int(np.argmin(costs))
+    if not np.isfinite(costs[i]):
+        return 0.0, 1.0
+    lo_m, hi_m = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    res = optimize.minimize_scalar(lambda m: cost(m)[0], bounds=(lo_m, hi_m), method="bounded",
+                                   options={"xatol": 0.005})
+    mu = float(res.x) if res.fun < costs[i] else float(grid[i])
+    sse, kappa = cost(mu)
+    sse0 = estimate_timing(LinearSim(num, den, prep.rate_hz, 0.0).run_start(u), y, use, lo, hi)[1]
+    n = int(use.sum())
+    # kept only when the two parameters pay for themselves (BIC, noise variance unknown): on an
+    # effect-free log the shift is then the nominal model's, as before. Not only when the gap is
+    # mostly load-like: beside a large drift (load + drift tuning cases) the load is a small part
+    # of the gap and its phase still biased the shift (the load was then lost)
+    # And only a load that moves the resonance by 5 % or more (``|mu| >= 0.1``): a smaller one biases
+    # the shift by little, and one fitted to a sampling convention on an effect-free log (mu 0.017)
+    # left the load's own residual for the selection to name
+    if (abs(mu) >= LOAD_SAG_MIN_MU and sse > 0 and sse0 > sse
+            and n * math.log(sse0 / sse) > 2.0 * math.log(max(n, 2))):
+        return mu, kappa
+    return 0.0, 1.0
 
 
 #: Candidate families, slowest fit first (measured on the Silverbox log): the order parallel fits start in.
@@ -748,6 +835,737 @@ def _pct(x: float) -> str:
     return f"{100 * x:.0f} %" if abs(x) >= 0.1 else f"{100 * x:.1f} %"
 
 
+# --------------------------------------------------------------------------- the stages of diagnose()
+#
+# diagnose() runs these in order: _nominal_model -> _model_stage (prepare, identify, timing) ->
+# _noise_stage (floor, where) -> _Context / _State -> _forward_selection (rounds of _fit_candidates,
+# _pair_candidates, _acceptance, _swap_stage) -> _repeat_check -> _clip_check -> _joint_refine_stage
+# -> _generalise -> _timing_fold -> _name_effects -> _export / _heldout_summary. The set-up stages
+# return a read-only _Context; the selection stages change only the _State they are given.
+
+
+def _nominal_model(model) -> tuple[np.ndarray | None, np.ndarray | None, dict]:
+    """Stage: the given model as ``(num, den, source)`` (``None, None, {}`` without one).
+
+    Raises :class:`DiagnosisFailed` when the model file says it is unusable."""
+    if isinstance(model, dict) and model.get("usable") is False:
+        reasons = model.get("reasons") or model.get("reason") or ["the model file says it is not usable"]
+        reasons = [str(r) for r in (reasons if isinstance(reasons, list) else [reasons])]
+        raise DiagnosisFailed("the nominal model is marked unusable (" + "; ".join(reasons) + "): identify it "
+                              "again from a log that passes its checks, or diagnose without --model",
+                              {"usable": False, "reasons": ["nominal model marked unusable"] + reasons,
+                               "effects": [], "dropped": [], "ambiguous": []})
+    if model is None:
+        return None, None, {}
+    num, den = _as_model(model)
+    return num, den, {"source": "given", "delay_s": _model_delay(model)}
+
+
+def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, say
+                 ) -> tuple[np.ndarray, np.ndarray, dict, dict, dict]:
+    """Stage: the linear model (identified without clipped samples when none is given), the timing
+    offset (set in ``prep``) and the measured clips. Returns ``num, den, source, timing, clips``."""
+    clips = flat_extremes(prep.records[0].y)
+    given = num is not None
+    if not given:
+        prep_id = prep
+        if clips:
+            # clipped samples only bound the output: identify the linear model without them
+            at = np.logical_or.reduce([m for _, m in clips.values()])
+            prep_id = replace(prep, records=[replace(prep.records[0], train=prep.records[0].train & ~at)]
+                              + prep.records[1:])
+            say(f"the output piles up on {', '.join(f'{v:.4g}' for v, _ in clips.values())} "
+                f"({int(at.sum())} samples, a clip): identifying without them")
+        num, den, source = _identify(prep_id, opts, say)
+    clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
+    timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
+    return num, den, source, timing, clips
+
+
+def _noise_stage(prep: Prepared, pipe: Pipeline, clips: dict) -> tuple[float, str, dict, dict, dict]:
+    """Stage: the noise variance from the nominal residual (``sigma2``, output units squared), its
+    estimator, how far to trust it, and the residual's localisation.
+
+    Returns ``sigma2, method, noise, where, arrays``."""
+    r0 = prep.records[0].y - pipe.simulate({}, 0)
+    sigma2, method = estimate_noise(r0, prep.rate_hz, prep.f_excited_hz)
+    noise_d = noise_trust(r0, prep.rate_hz, prep.f_excited_hz, sigma2, method)
+    where = analyse(pipe, sigma2, method)
+    where["level"]["clipped_output"] = {end: {"value": v, "samples": int(m.sum()),
+                                              "share": float(m.mean())} for end, (v, m) in clips.items()}
+    arrays = where.pop("_arrays")
+    return sigma2, method, noise_d, where, arrays
+
+
+@dataclass
+class _Context:
+    """What every selection stage reads: data, model, options, noise and the held-out test's set-up.
+
+    Set once by the set-up stages; ``scores`` and the NRMSE helpers are the only way the
+    stages measure a set of effects (training and validation choose, the final part reports)."""
+
+    prep: Prepared
+    pipe: Pipeline
+    opts: DiagnoseOptions
+    say: Callable[[str], None]
+    source: dict
+    den: np.ndarray
+    sigma2: float
+    noise_method: str
+    identified: bool
+    labels_va: np.ndarray
+    slow_n: int
+    lag_va: int
+    slow_zc: int
+    n_tr: int
+    n_va: int
+    norm_ho: float
+    norm_fi: float
+    floor: float
+    floor_va: float
+    nominal_offset: float = 0.0
+
+    @classmethod
+    def build(cls, prep: Prepared, pipe: Pipeline, opts: DiagnoseOptions, say, source: dict, den: np.ndarray,
+              sigma2: float, method: str, identified: bool) -> "_Context":
+        """The context of a prepared log; raises :class:`BadInputError` when too little is held out."""
+        y_ho = prep.stacked("y", "valid")
+        y_fi = prep.stacked("y", "hold")
+        if y_ho.size < 10 or y_fi.size < 10:
+            raise BadInputError("too little held-out data to score a model")
+        norm_ho = float(np.sum((y_ho - y_ho.mean()) ** 2))
+        norm_fi = float(np.sum((y_fi - y_fi.mean()) ** 2))
+        labels_va = _block_labels(prep, "valid")
+        # the slow part left out of the held-out test: opts.wander_s of the log, in stacked validation samples
+        n_all = sum(r.t_s.size for r in prep.records)
+        per_s = prep.rate_hz * labels_va.size / max(n_all, 1)
+        ctx = cls(prep=prep, pipe=pipe, opts=opts, say=say, source=source, den=den, sigma2=sigma2,
+                  noise_method=method, identified=identified, labels_va=labels_va,
+                  slow_n=int(round(opts.wander_s * per_s)),
+                  # the span of noise correlation the coloured z allows for: a median validation block
+                  lag_va=int(np.median(np.bincount(labels_va))) if labels_va.size else 0,
+                  slow_zc=int(round(opts.wander_zc_s * per_s)),
+                  n_tr=prep.stacked("y", "train").size, n_va=int(y_ho.size), norm_ho=norm_ho, norm_fi=norm_fi,
+                  floor=math.sqrt(sigma2 * y_fi.size / norm_fi) if norm_fi > 0 else float("inf"),
+                  floor_va=math.sqrt(sigma2 * y_ho.size / norm_ho) if norm_ho > 0 else float("inf"))
+        if identified:
+            # a model identified here leaves the log's output offset out (for the static map to name)
+            ctx.nominal_offset = float(np.mean(pipe.residuals({}, "train")))
+        return ctx
+
+    def scores(self, eff: dict[str, EffectFit]) -> tuple[float, float, np.ndarray]:
+        """Training and validation mean squared errors, and the validation residual."""
+        e_tr = self.pipe.residuals(eff, "train")
+        e_ho = self.pipe.residuals(eff, "valid")
+        return float(np.mean(e_tr ** 2)), float(np.mean(e_ho ** 2)), e_ho
+
+    def final_sse(self, eff: dict[str, EffectFit]) -> float:
+        """Squared error on the final held-out samples (reported only, never chosen on)."""
+        e = self.pipe.residuals(eff, "hold")
+        return float(np.sum(e * e))
+
+    def final_nrmse(self, eff: dict[str, EffectFit]) -> float:
+        """NRMSE on the final held-out samples (reported only, never chosen on)."""
+        return math.sqrt(self.final_sse(eff) / self.norm_fi) if self.norm_fi > 0 else float("inf")
+
+    def to_nrmse(self, mse: float) -> float:
+        """A validation mean squared error as an NRMSE."""
+        return math.sqrt(max(mse, 0.0) * self.n_va / self.norm_ho)
+
+    def held_out(self, e_old: np.ndarray, e_new: np.ndarray) -> tuple[float, float]:
+        """The two held-out scores of ``e_old -> e_new``: block score and coloured-noise z."""
+        return (block_test(e_old, e_new, self.labels_va, self.slow_n),
+                coloured_z(e_old, e_new, self.lag_va, self.slow_zc))
+
+
+@dataclass
+class _State:
+    """The selection so far: the chosen effects and their scores, and what the verdict records."""
+
+    current: dict[str, EffectFit]
+    mse_tr: float
+    mse_ho: float
+    e_ho: np.ndarray
+    mse_nom: float
+    rounds: list[dict] = field(default_factory=list)
+    evidence_of: dict[str, tuple] = field(default_factory=dict)
+    ambiguous: list[dict] = field(default_factory=list)
+    pending_evidence: dict | None = None
+
+    def adopt(self, current: dict[str, EffectFit], m_tr: float, m_ho: float, e_ho: np.ndarray) -> None:
+        """Make ``current`` the selection, with its training/validation errors and residual."""
+        self.current, self.mse_tr, self.mse_ho, self.e_ho = current, m_tr, m_ho, e_ho
+
+
+def _start_state(ctx: _Context) -> _State:
+    """Stage: the empty selection (or the measured clip every fit sees), scored."""
+    mse_tr, mse_ho, e_ho = ctx.scores({})
+    mse_nom = mse_ho
+    if ctx.identified:
+        # the nominal gap later effects are measured against is that of the model with its training
+        # offset, else any offset-absorbing first effect would leave every further effect a
+        # negligible share of it
+        mse_nom = min(mse_nom, float(np.mean((e_ho - ctx.nominal_offset) ** 2)))
+    st = _State({}, mse_tr, mse_ho, e_ho, mse_nom)
+    clip0 = measured_clip(ctx.pipe.clips)
+    if clip0 is not None:
+        # the measured output piles up on its extremes: every fit sees the model clipped there (a
+        # prediction beyond the measured range can only be further from what was measured); whether
+        # to name it is decided in _clip_check
+        st.adopt({"saturation": clip0}, *ctx.scores({"saturation": clip0}))
+        ctx.say(f"the measured output piles up on {', '.join(f'{v:.6g} ({k})' for k, v in ctx.pipe.clips.items())}"
+                f": the fits see the model clipped there (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f})")
+    return st
+
+
+#: A candidate: (validation mse, n_params, name, fit, training mse, validation residual, effects).
+Candidate = tuple
+
+
+def _fit_one(ctx: _Context, base: dict[str, EffectFit], name: str) -> Candidate | None:
+    """Fit family ``name`` on top of ``base``: (mse_ho, n_params, name, fit, mse_tr, e_ho, effects), or None."""
+    tc = time.perf_counter()
+    fit = fit_family(ctx.pipe, base, name)
+    if fit is None:
+        return None
+    if name == "asymmetric_dynamics" and fit.variant == "output":
+        lo_, hi_ = sorted(fit.theta[:2])
+        if hi_ < ctx.opts.asym_ratio_min * (lo_ + 0.5 * ctx.prep.dt_s):
+            ctx.say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
+            return None
+    eff = dict(base)
+    eff[name] = fit
+    m_tr, m_ho, e_new = ctx.scores(eff)
+    if ctx.identified:
+        try:
+            alt = _relinear(ctx, base, name, fit)
+        except ValueError:  # a re-identified model the load family makes unstable, say
+            alt = None
+        if alt is not None:
+            a_tr, a_ho, a_e = ctx.scores(alt)
+            if a_tr < m_tr:
+                eff, fit, m_tr, m_ho, e_new = alt, alt[name], a_tr, a_ho, a_e
+    label = " + ".join([k for k in base if k != LINEAR] + [name]) + (" (re-identified)" if LINEAR in eff else "")
+    ctx.say(f"  {label:40s} validation NRMSE {ctx.to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
+    return (m_ho, fit.n_params, name, fit, m_tr, e_new, eff)
+
+
+def _fit_groups(ctx: _Context, groups: list[tuple[dict[str, EffectFit], list[str]]]) -> list[list[Candidate]]:
+    """:func:`_fit_candidates` for several ``(base, names)`` at once, the fits spread over processes
+    (:func:`hasel.diagnose.pool.pmap`, the slowest families first; the same results as in series)."""
+    tasks = [(gi, base, n) for gi, (base, names) in enumerate(groups) for n in names]
+    order = sorted(range(len(tasks)), key=lambda i: _SLOW_FIRST.get(tasks[i][2], len(_SLOW_FIRST)))
+    got = dict(zip(order, pmap(lambda i: _fit_one(ctx, tasks[i][1], tasks[i][2]), order)))
+    outs: list[list[Candidate]] = [[] for _ in groups]
+    for i, (gi, _, _) in enumerate(tasks):
+        if got[i] is not None:
+            outs[gi].append(got[i])
+    for out in outs:
+        out.sort(key=lambda r: (r[0], r[1]))
+    return outs
+
+
+def _fit_candidates(ctx: _Context, base: dict[str, EffectFit], names: list[str]) -> list[Candidate]:
+    """Fit each family on top of ``base``: sorted (mse_ho, n_params, name, fit, mse_tr, e_ho, effects)."""
+    return _fit_groups(ctx, [(base, names)])[0]
+
+
+def _relinear(ctx: _Context, base: dict[str, EffectFit], name: str, fit: EffectFit) -> dict[str, EffectFit] | None:
+    """An input-side effect fitted jointly with a re-identified linear model.
+
+    A linear model identified first from the same log absorbs what it can of an effect (the
+    phase lag of a hysteresis loop, part of a delay); so, when the model was identified,
+    the effect is also fitted from a plain-gain start and the linear model re-identified
+    through it (twice)."""
+    if name not in INPUT_SIDE or any(k not in INPUT_SIDE + (LINEAR, "load_mass") for k in base):
+        return None
+    from hasel.diagnose.linfit import fit_linear
+
+    prep, pipe, opts = ctx.prep, ctx.pipe, ctx.opts
+    ys = np.concatenate([r.y[r.train] for r in prep.records])
+    us = np.concatenate([r.u[r.train] for r in prep.records])
+    k0 = float(us @ ys / max(us @ us, 1e-300))
+    a = 0.3 * np.pi * prep.rate_hz
+    eff = {**base, LINEAR: make_linear([k0 * a], [1.0, a])}
+    order = ctx.source.get("details", {}).get("order")
+    orders = ((min(int(order), opts.max_order),) if isinstance(order, (int, np.integer)) and order > 0
+              else None)
+
+    lin0 = base.get(LINEAR)
+    poles0 = np.roots(split_linear(lin0)[1] if lin0 is not None else ctx.den)
+    if orders is not None and poles0.size != orders[0]:
+        poles0 = None
+
+    def reident(e: dict[str, EffectFit], warm_only: bool = False) -> EffectFit | None:
+        recs = [replace(r, u=pipe.stages(e, ri)["x_eff"]) for ri, r in enumerate(prep.records)]
+        try:
+            n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order,
+                                   init_poles=poles0, warm_only=warm_only and poles0 is not None)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+        return make_linear(n2, d2)
+
+    if name == "time_delay":
+        # a delay trades off against the model's time constants: profile it, re-identifying
+        # the linear model at each delay of a grid, then refine between the best's
+        # neighbours (alternating fits would lock in)
+        cache: dict[float, tuple[float, dict | None]] = {}
+
+        def at(d: float) -> float:
+            d = float(d)
+            if d not in cache:
+                e = {**base, name: EffectFit(name, "input", (d,))}
+                lin = reident(e, warm_only=True)  # a profile: many small changes of one input
+                if lin is None:
+                    cache[d] = (np.inf, None)
+                else:
+                    e[LINEAR] = lin
+                    for _ in range(2):  # the other effects of the base follow the new linear part
+                        for k2 in [k for k in base if k != LINEAR]:
+                            f2 = fit_family(pipe, {k: v for k, v in e.items() if k != k2}, k2)
+                            if f2 is not None:
+                                e[k2] = f2
+                    cache[d] = (ctx.scores(e)[0], e)
+            return cache[d][0]
+
+        d_hi = max(fit.theta[0], min(0.2 * pipe.span_s, 5.0 * pipe.t_dom), 2 * prep.dt_s)
+        grid = np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, d_hi, 8)]))
+        # the grid's points are independent: in parallel processes (serially inside a worker)
+        cache.update(zip(map(float, grid), pmap(lambda d: (at(d), cache[float(d)])[1], grid)))
+        costs = [at(d) for d in grid]
+        i = int(np.argmin(costs))
+        lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+        if hi_ > lo_:
+            optimize.minimize_scalar(at, bounds=(lo_, hi_), method="bounded",
+                                     options={"maxiter": 8, "xatol": 0.02 * (hi_ - lo_)})
+        best = min(cache.values(), key=lambda ce: ce[0])
+        return best[1]
+    tried = []
+    for _ in range(2):
+        f = fit_family(pipe, eff, name)
+        if f is None:
+            return None
+        eff[name] = f
+        tried.append(dict(eff))  # the first: the effect on a quasi-static gain (no lag to absorb it)
+        lin = reident(eff)
+        if lin is None:
+            break
+        eff[LINEAR] = lin
+    else:
+        f = fit_family(pipe, eff, name)
+        if f is not None:
+            eff[name] = f
+            tried.append(eff)
+    return min(tried, key=lambda e: ctx.scores(e)[0]) if tried else None
+
+
+_PRIOR = {n: i for i, n in enumerate(FAMILIES)}
+
+
+def _pick(results: list[Candidate]) -> Candidate:
+    """Lowest validation error; near-ties (1 %) go to fewer parameters, then to the earlier family.
+
+    The family order (FAMILIES) is the tie-break prior: an offset or a curvature that the
+    data cannot place before or after the dynamics is read as the actuator's static map
+    rather than the sensor's.
+    """
+    best = results[0]
+    for r in results[1:]:
+        if r[0] <= 1.01 * best[0] and (r[1] < best[1] or (r[1] == best[1] and r[0] <= 1.005 * best[0]
+                                                          and _PRIOR[r[2]] < _PRIOR[best[2]])):
+            best = r
+    return best
+
+
+def _alternate(ctx: _Context, eff: dict[str, EffectFit], names_: list[str]) -> dict[str, EffectFit]:
+    """Refit each of ``names_`` given the others (twice), keeping a refit only if training improves."""
+    for _ in range(2):
+        for nm in names_:
+            f2 = fit_family(ctx.pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm, init=eff.get(nm))
+            if f2 is not None:
+                trial = {**eff, nm: f2}
+                if ctx.scores(trial)[0] <= ctx.scores(eff)[0]:
+                    eff = trial
+    return eff
+
+
+def _pair_candidates(ctx: _Context, st: _State, singles: list[Candidate], results: list[Candidate]
+                     ) -> list[Candidate]:
+    """Stage of the second round: pairs among the best single effects, alternated and refined.
+
+    Not only the pairs holding the very best single: the best single augmentation may be
+    soaking up two effects' signatures. Sequential fits of a pair can lock the first effect
+    into soaking up the second, so the most promising pairs are alternated (each refitted
+    given the other) from both orders, and the best few refined jointly. Returns ``results``
+    with the pairs added, sorted."""
+    opts, pipe = ctx.opts, ctx.pipe
+    pool = [r for r in singles[:opts.pair_pool] if r[2] not in st.current]
+    for got in _fit_groups(ctx, [({**{k: v for k, v in st.current.items() if _fixed(k, v)}, a[2]: a[3]},
+                                  [b[2] for b in pool[i + 1:]]) for i, a in enumerate(pool)]):
+        results += got
+    results.sort(key=lambda r: (r[0], r[1]))
+
+    def improve(r: Candidate) -> tuple[float, dict[str, EffectFit]]:
+        names_ = [k for k, v in r[6].items() if not _fixed(k, v)]
+        fixed = {k: v for k, v in r[6].items() if _fixed(k, v)}
+        tries = [_alternate(ctx, dict(r[6]), names_)]
+        if len(names_) == 2:  # the other order: the second effect fitted alone first
+            b, a = names_
+            fa = fit_family(pipe, fixed, a)
+            fb = fit_family(pipe, {**fixed, a: fa}, b) if fa is not None else None
+            if fb is not None:
+                tries.append(_alternate(ctx, {**fixed, a: fa, b: fb}, [a, b]))
+        eff = min(tries, key=lambda e: ctx.scores(e)[0])
+        return ctx.scores(eff)[0], eff
+
+    # independent of each other: in parallel processes (hasel.diagnose.pool)
+    top = results[:opts.pair_alternate]
+    improved = [(m, r, eff) for r, (m, eff) in zip(top, pmap(improve, top))]
+    improved.sort(key=lambda x: x[0])
+    for i, (_, r, eff) in enumerate(improved):
+        if i < opts.pair_joint:
+            eff = joint_refine(pipe, eff, max_nfev=opts.pair_joint_nfev)
+        m_tr2, m_ho2, e2 = ctx.scores(eff)
+        if m_ho2 < r[0]:
+            ctx.say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {ctx.to_nrmse(m_ho2):.4f} "
+                    f"(alternating{' and joint' if i < opts.pair_joint else ''} fits)")
+            results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+    results.sort(key=lambda r: (r[0], r[1]))
+    return results
+
+
+#: Linear changes told apart by where they move the frequency response (:func:`load_or_delay`).
+_LINEAR_RIVALS = {"time_delay": "load_mass", "load_mass": "time_delay"}
+
+
+def _frequency_evidence(ctx: _Context, st: _State, results: list[Candidate], best: Candidate) -> Candidate:
+    """Stage: between a delay and a load, the frequency response decides, not a near score.
+
+    A load moves the magnitude near the resonance, a delay only the phase, linearly in
+    frequency (:func:`hasel.effects.evidence.load_or_delay`, read on the residual of the
+    current selection). When the best candidate adds one of the two, the other was fitted on
+    the same base and scores alike (removes at least ``opts.alike_share`` of what the best
+    removes), and the response favours the other, the other is taken. The reading is recorded in the round either way (``frequency_evidence``)."""
+    new = [k for k in best[6] if k not in st.current and k != LINEAR]
+    if len(new) != 1 or new[0] not in _LINEAR_RIVALS:
+        return best
+    rival = _LINEAR_RIVALS[new[0]]
+    alt = next((r for r in results if r[2] == rival and set(r[6]) - {LINEAR} == set(st.current) - {LINEAR} | {rival}),
+               None)
+    if alt is None:
+        return best
+    from hasel.effects.evidence import load_or_delay
+
+    ev = load_or_delay(ctx.pipe, st.current, ctx.pipe.den)
+    gain_best, gain_alt = st.mse_ho - best[0], st.mse_ho - alt[0]
+    # it breaks near-ties only: on a load + drift tuning case the response read "delay" at the edge of its
+    # thresholds (0.50 dB) while the load removed far more (validation 0.0055 against 0.0079), and a
+    # switch at "half as much" named the delay
+    switch = ev["favours"] == rival and gain_alt >= ctx.opts.alike_share * gain_best > 0
+    st.pending_evidence = ({k: ev[k] for k in ("favours", "n_bins") if k in ev}
+                           | {"delay_s": ev.get("delay", {}).get("delay_s"),
+                              "magnitude_rms_db": ev.get("delay", {}).get("magnitude_rms_db"),
+                              "phase_left_after_delay_deg": ev.get("delay", {}).get("phase_residual_rms_deg"),
+                              "magnitude_near_resonance_db": ev.get("load", {}).get("magnitude_near_resonance_rms_db"),
+                              "chosen": rival if switch else new[0]})
+    ctx.say(f"  frequency response: {ev['favours']} favoured (magnitude "
+            f"{ev.get('delay', {}).get('magnitude_rms_db', float('nan')):.2f} dB rms, phase left after a delay "
+            f"{ev.get('delay', {}).get('phase_residual_rms_deg', float('nan')):.1f} deg)"
+            + (f": {rival} taken instead of {new[0]}" if switch else ""))
+    return alt if switch else best
+
+
+def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], best: Candidate) -> tuple[bool, float]:
+    """Stage: record round ``rnd`` and test its best candidate (see :class:`DiagnoseOptions`).
+
+    Returns (accepted, share of the validation residual energy the candidate removes)."""
+    opts, sigma2 = ctx.opts, ctx.sigma2
+    m_ho, _, _, _, m_tr, e_new, eff_new = best
+    k = sum(f.n_params for f in eff_new.values()) - sum(f.n_params for f in st.current.values())
+    st.rounds.append({"round": rnd + 1, "candidates": [
+        {"name": " + ".join(k for k in r[6] if k != LINEAR), "nrmse_validation": ctx.to_nrmse(r[0]), "n_params": r[1]}
+        for r in results]})
+    mse_ho = st.mse_ho
+    gain = (mse_ho - m_ho) / mse_ho if mse_ho > 0 else 0.0
+    above = max(mse_ho - sigma2, 0.0)
+    gap_share = (mse_ho - m_ho) / above if above > 0 else 0.0
+    nominal_share = (mse_ho - m_ho) / max(st.mse_nom - sigma2, 1e-300)
+    # against the noise floor: with white noise of variance sigma2 left in the current residual,
+    # the validation SSE drop of a change delta has sd 2 sigma ||delta||
+    delta = st.e_ho - e_new
+    z = float(np.sum(st.e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
+    dbic = -(st.mse_tr - m_tr) * ctx.n_tr / sigma2 + k * math.log(ctx.n_tr)
+    need = opts.min_first_gain if rnd == 0 else opts.min_next_gain
+    # a share of the nominal gap, or (smaller) if it explains nearly all that is left
+    big_enough = nominal_share >= opts.min_nominal_share or (
+        gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all)
+    t_blk, z_col = ctx.held_out(st.e_ho, e_new)
+    held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
+    ok = gain >= need and gap_share >= opts.min_gap_share and big_enough and held_out_ok and dbic < 0
+    label_new = " + ".join(k for k in eff_new if k != LINEAR)
+    st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
+                          "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic, "accepted": bool(ok)})
+    ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
+            f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
+            f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g} -> "
+            f"{'accepted' if ok else 'rejected'}")
+    return ok, gain
+
+
+def _adopt_candidate(ctx: _Context, st: _State, results: list[Candidate], best: Candidate, gain: float) -> None:
+    """Stage: make an accepted candidate the selection; note an alike explanation and the runner-up."""
+    m_ho, _, name, _, m_tr, e_new, eff_new = best
+    alike = _alike(results, eff_new, e_new, st.mse_ho, gain, ctx.labels_va, ctx.opts, ctx.to_nrmse, ctx.slow_n)
+    if alike is not None:
+        st.ambiguous.append(alike)
+        ctx.say(f"  {alike['chosen']} and {alike['alternative']} score alike (preference {alike['preference']:.1f}): "
+                f"{alike['experiment']}")
+    r2 = next((r for r in results if r[2] != name), None)
+    for n_new in eff_new:
+        if n_new not in st.current and n_new != LINEAR:
+            st.evidence_of[n_new] = (gain, (r2[2], (st.mse_ho - r2[0]) / st.mse_ho)
+                                     if r2 is not None and st.mse_ho > 0 else None)
+    for n_old in [n for n in st.current if n not in eff_new]:
+        st.evidence_of.pop(n_old, None)
+    st.adopt(dict(eff_new), m_tr, m_ho, e_new)
+
+
+def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
+    """Stage: with the newcomer ``name`` in place, swap an earlier choice for another family that
+    lowers the validation error below ``opts.swap_ratio`` of it."""
+    for old in [n for n, v in st.current.items() if n != name and not _fixed(n, v)]:
+        base = {k2: v for k2, v in st.current.items() if k2 != old}
+        alts = [a for a in _fit_candidates(ctx, base, [f for f in FAMILIES if f not in st.current])
+                if not linear_static(ctx.pipe, a[6])]
+        if alts and alts[0][0] < ctx.opts.swap_ratio * st.mse_ho:
+            a = alts[0]
+            ctx.say(f"  swap: {a[2]} replaces {old} (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> "
+                    f"{ctx.to_nrmse(a[0]):.4f})")
+            st.rounds[-1].setdefault("swaps", []).append({"out": old, "in": a[2], "nrmse_validation": ctx.to_nrmse(a[0])})
+            swapped = {(a[2] if k2 == old else k2): (a[3] if k2 == old else v) for k2, v in st.current.items()}
+            st.evidence_of[a[2]] = st.evidence_of.pop(old)
+            st.adopt(swapped, a[4], a[0], a[5])
+
+
+def _forward_selection(ctx: _Context, st: _State) -> None:
+    """Stage: rounds of candidate fits; the best is added while it passes :func:`_acceptance`."""
+    opts = ctx.opts
+    singles: list[Candidate] = []
+    for rnd in range(opts.max_effects):
+        # the first round runs even at the floor: an effect that shows in a few places only (a clip of
+        # the highest commands, a step's transient) leaves the whole log's NRMSE at the floor, and the
+        # acceptance test (the coloured-noise z) credits it where it shows
+        if rnd > 0 and ctx.to_nrmse(st.mse_ho) <= opts.floor_margin * ctx.floor_va:
+            ctx.say("at the noise floor: no further effect")
+            break
+        if rnd > 0 and (st.mse_ho - ctx.sigma2 < (min(opts.min_nominal_share, opts.min_nominal_share_near_all)
+                                                  * (st.mse_nom - ctx.sigma2))
+                        or (st.mse_ho - ctx.sigma2 < opts.stop_share * (st.mse_nom - ctx.sigma2)
+                            and st.mse_ho < opts.stop_over_floor * ctx.sigma2)):
+            ctx.say("what is left is too small a share of the nominal gap for any further effect")
+            break
+        results = _fit_candidates(ctx, st.current, [f for f in FAMILIES if f not in st.current][:max(opts.top_k, 1)])
+        if rnd == 0:
+            singles = results
+        elif rnd == 1 and opts.pair_pool > 1:
+            results = _pair_candidates(ctx, st, singles, results)
+        # a static map that is nearly a line (e.g. after a joint refinement) is a linear correction
+        # of the model, not a static nonlinearity: such a set is not a candidate
+        results = [r for r in results if not linear_static(ctx.pipe, r[6])]
+        if not results:
+            break
+        best = _frequency_evidence(ctx, st, results, _pick(results))
+        ok, gain = _acceptance(ctx, st, rnd, results, best)
+        if st.pending_evidence is not None:
+            st.rounds[-1]["frequency_evidence"], st.pending_evidence = st.pending_evidence, None
+        if not ok:
+            break
+        _adopt_candidate(ctx, st, results, best, gain)
+        _swap_stage(ctx, st, best[2])
+
+
+def _direct_check(ctx: _Context, st: _State, kind: str, label: str, trial: dict[str, EffectFit], ok: bool,
+                  info: dict, text: str) -> None:
+    """Record a check of a signature seen directly in the data; adopt ``trial`` if ``ok``."""
+    m_tr, m_ho, e_new = ctx.scores(trial)
+    name = next(k for k in trial if k not in st.current)
+    gain = (st.mse_ho - m_ho) / st.mse_ho if st.mse_ho > 0 else 0.0
+    st.rounds.append({"round": len(st.rounds) + 1, kind: True, "best": label, "accepted": bool(ok), "gain": gain,
+                      "candidates": [{"name": name, "nrmse_validation": ctx.to_nrmse(m_ho),
+                                      "n_params": trial[name].n_params}], **info})
+    ctx.say(f"{text}; validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho):.4f} -> "
+            f"{'accepted' if ok else 'rejected'}")
+    if ok:
+        st.evidence_of[name] = (gain, None)
+        st.adopt(trial, m_tr, m_ho, e_new)
+
+
+def _repeat_check(ctx: _Context, st: _State, where: dict) -> None:
+    """Stage: a drift seen directly in the data.
+
+    The residual changes between repeats of the excitation, where every time-invariant
+    effect predicts the same output; levels that follow the log's history let a static map
+    take over the drift's level part, so this asks the repeats."""
+    opts, pipe, sigma2 = ctx.opts, ctx.pipe, ctx.sigma2
+    rp = where["time"].get("repeats") or {}
+    if not (rp.get("repeat_difference_rms") is not None and "charge_drift" not in st.current
+            and rp["over_noise"] >= opts.repeat_over_noise_min):
+        return
+    got = fit_drift_on_repeats(pipe, st.current, float(rp["period_s"]))
+    if got is None:
+        return
+    drift, stats_ = got
+    b0, b1, n_pairs, fit2 = stats_["valid"]
+    share = (b0 - b1) / max(b0 - 2.0 * sigma2 * n_pairs, 1e-300)
+    z_rep = (b0 - b1) / (2.0 * math.sqrt(2.0 * sigma2) * max(math.sqrt(fit2), 1e-300))
+    trial = {**st.current, "charge_drift": drift}
+    for _ in range(2):  # the other effects follow, no longer taking the drift's level part
+        for k2 in [k for k, v in st.current.items() if not _fixed(k, v)]:
+            f2 = fit_family(pipe, {kk: vv for kk, vv in trial.items() if kk != k2}, k2, init=trial[k2])
+            if f2 is not None:
+                trial[k2] = f2
+    _, m_ho, e_trial = ctx.scores(trial)
+    t_blk, z_col = ctx.held_out(st.e_ho, e_trial)
+    ok = (share >= opts.repeat_share_min and z_rep >= opts.z_min and m_ho <= opts.repeat_mse_ratio * st.mse_ho
+          and (t_blk >= opts.t_min or z_col >= opts.zc_min))
+    _direct_check(ctx, st, "repeat_check", "charge_drift", trial, ok,
+                  {"period_s": rp["period_s"], "repeat_change_share_explained": share, "z": z_rep,
+                   "t_block": t_blk, "z_coloured": z_col},
+                  f"repeat check: the residual changes between repeats ({rp['over_noise']:.1f} x noise); "
+                  f"a drift explains {100 * share:.0f} % of that change above noise (z {z_rep:.1f})")
+
+
+def _clip_check(ctx: _Context, st: _State) -> None:
+    """Stage: a clip seen directly in the data (the output piles up on its extreme value).
+
+    The measured clip was part of every fit; it is named where the model goes beyond it there
+    and clipping helps significantly, else it is taken out."""
+    if not ("saturation" in st.current and st.current["saturation"].variant.startswith("measured")):
+        return
+    opts, pipe, prep = ctx.opts, ctx.pipe, ctx.prep
+    kept = {}
+    r0 = prep.records[0]  # the signature on the samples choices may see (training and validation)
+    seen = r0.train | r0.valid
+    without_all = {k2: v for k2, v in st.current.items() if k2 != "saturation"}
+    # the nominal model's prediction (with its training offset, if identified here) and the chosen
+    # model's without the clip: either going beyond the limit where the output sits on it
+    preds = [pipe.simulate({}, 0)[seen] + (ctx.nominal_offset if ctx.identified else 0.0),
+             pipe.simulate(without_all, 0)[seen]]
+    for end, limit in pipe.clips.items():
+        at = (np.abs(r0.y - limit) <= 1e-6 * max(float(np.ptp(r0.y)), 1e-300))[seen]
+        share = max(float(((p > limit) if end == "upper" else (p < limit))[at].mean()) if at.any() else 0.0
+                    for p in preds)
+        others = {e2: v2 for e2, v2 in pipe.clips.items() if e2 != end}
+        base = dict(without_all)
+        if measured_clip(others) is not None:
+            base["saturation"] = measured_clip(others)
+        _, m_without, e_without = ctx.scores(base)
+        z = float(np.sum(e_without ** 2 - st.e_ho ** 2)
+                  / (2.0 * math.sqrt(ctx.sigma2) * max(np.linalg.norm(e_without - st.e_ho), 1e-300)))
+        t_blk, z_col = ctx.held_out(e_without, st.e_ho)
+        # the clip is seen directly (samples pile up on one value): held out, it must only help
+        # beyond chance (one-sided 5 %), not pass the test that guards against invented effects
+        ok = (share >= opts.clip_share_min and st.mse_ho < m_without and z >= opts.z_min
+              and (t_blk >= opts.t_min or z_col >= 1.645))
+        st.rounds.append({"round": len(st.rounds) + 1, "clip_check": True, "end": end, "limit": float(limit),
+                          "share_beyond_at_clip": share, "clipped_samples": int(at.sum()), "z": z, "t_block": t_blk,
+                          "z_coloured": z_col, "gain": (m_without - st.mse_ho) / m_without if m_without > 0 else 0.0,
+                          "accepted": bool(ok), "candidates": []})
+        ctx.say(f"clip check: the output piles up on {limit:.6g} ({end}); a model goes beyond it on "
+                f"{100 * share:.0f} % of those samples; clipping there removes {100 * st.rounds[-1]['gain']:.1f} % "
+                f"(z {z:.1f}, held-out block score {t_blk:.1f}, coloured-noise z {z_col:.1f}) -> "
+                f"{'named' if ok else 'not named'}")
+        if ok:
+            kept[end] = limit
+    clip = measured_clip(kept)
+    current = dict(without_all)
+    if clip is not None:
+        current["saturation"] = clip
+        st.evidence_of["saturation"] = (max(r["gain"] for r in st.rounds if r.get("clip_check")), None)
+    st.adopt(current, *ctx.scores(current))
+
+
+def _joint_refine_stage(ctx: _Context, st: _State) -> None:
+    """Stage: refine all chosen effects' parameters together; kept if validation does not worsen."""
+    if len(st.current) > 1 and ctx.opts.joint_refine:
+        refined = joint_refine(ctx.pipe, st.current, max_nfev=ctx.opts.joint_refine_nfev)
+        m_tr, m_ho, e_new = ctx.scores(refined)
+        if m_ho <= st.mse_ho and not linear_static(ctx.pipe, refined):
+            ctx.say(f"joint refinement: validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho):.4f}")
+            st.adopt(refined, m_tr, m_ho, e_new)
+
+
+def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:
+    """Stage: a delay within one original sample is a timing offset (a convention or clock offset), not
+    physics: it stays in the model as a nuisance and is added to ``timing``. Returns the nuisance names."""
+    prep = ctx.prep
+    fs_orig = prep.info.get("original_rate_hz", prep.rate_hz)
+    sub = st.current.get("time_delay")
+    if sub is not None and sub.theta and sub.theta[0] * fs_orig < 1.0:
+        timing["delay_fit_within_one_sample_s"] = float(sub.theta[0])
+        timing["seconds"] = float(timing["seconds"] + sub.theta[0])
+        timing["original_samples"] = float(timing["original_samples"] + sub.theta[0] * fs_orig)
+        ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample: a timing offset, not named")
+    return {"time_delay"} if "delay_fit_within_one_sample_s" in timing else set()
+
+
+def _name_effects(ctx: _Context, st: _State, where: dict, units: tuple[str, str], nuisance: set[str]) -> list[dict]:
+    """Stage: the named effects ranked by importance (the validation loss when each is taken out of the
+    final set), each with its parameters, evidence and credit (taken out alone, the others in place)."""
+    current, pipe = st.current, ctx.pipe
+
+    def loss_without(n: str) -> float:
+        return ctx.scores(_without(current, n))[1]
+
+    sse_nom_fi, sse_all_fi = ctx.final_sse({}), ctx.final_sse(current)
+    mse_nom_va = ctx.scores({})[1]  # the nominal model as given (no offset): the base of every credit
+    ranked = sorted((n for n in current if n != LINEAR and n not in nuisance), key=loss_without, reverse=True)
+    named: list[dict] = []
+    for i, name in enumerate(ranked):
+        fit = current[name]
+        m_after = ctx.final_nrmse({k2: current[k2] for k2 in ranked[:i + 1] + ([LINEAR] if LINEAR in current else [])})
+        gain, runner = st.evidence_of.get(name, (0.0, None))
+        credit_va = (loss_without(name) - st.mse_ho) / mse_nom_va if mse_nom_va > 0 else 0.0
+        credit_fi = (ctx.final_sse(_without(current, name)) - sse_all_fi) / sse_nom_fi if sse_nom_fi > 0 else 0.0
+        named.append({"name": name, "params": describe_params(pipe, fit, units, effects=current),
+                      "evidence": _evidence(name, fit, where, credit_va, runner, pipe, units, credit_fi),
+                      "nrmse_after": m_after, "gap_removed": gain,
+                      "credit": {"validation": credit_va, "final": credit_fi,
+                                 "note": "share of the nominal model's residual energy that comes back when this "
+                                         "effect alone is taken out of the final set (validation / final samples)"},
+                      "n_params": fit.n_params, "theta": list(fit.theta)})
+    return named
+
+
+def _export(ctx: _Context, current: dict[str, EffectFit]) -> dict[str, np.ndarray]:
+    """Stage: ``t_s``, ``measured``, ``nominal``, ``augmented`` over the final held-out samples."""
+    ts, meas, nom, aug = [], [], [], []
+    for ri, rec in enumerate(ctx.prep.records):
+        if rec.hold.any():
+            ts.append(rec.t_s[rec.hold])
+            meas.append(rec.y[rec.hold])
+            nom.append(ctx.pipe.simulate({}, ri)[rec.hold])
+            aug.append(ctx.pipe.simulate(current, ri)[rec.hold])
+    return {"t_s": np.concatenate(ts), "measured": np.concatenate(meas), "nominal": np.concatenate(nom),
+            "augmented": np.concatenate(aug)}
+
+
+def _heldout_summary(ctx: _Context, st: _State, nrmse_nom: float, nrmse_nom_va: float, nrmse_aug: float) -> dict:
+    """Stage: the verdict's ``heldout`` entry (final part figures, with validation beside them)."""
+    floor = ctx.floor
+    shrink = ((nrmse_nom - nrmse_aug) / (nrmse_nom - floor)) if nrmse_nom > floor else 0.0
+    return {"nrmse_nominal": nrmse_nom, "nrmse_augmented": nrmse_aug, "split": ctx.prep.split,
+            "n_samples": int(ctx.prep.stacked("y", "hold").size), "gap_shrink": shrink,
+            "truncated_to_s": ctx.prep.info.get("truncated_to_s"),
+            "parts": {"train_samples": int(ctx.n_tr), "validation_samples": int(ctx.n_va),
+                      "final_samples": int(ctx.prep.stacked("y", "hold").size),
+                      "note": "effects are chosen, accepted and ranked on the validation samples; these "
+                              "NRMSEs (and nrmse_after) are on the final samples, used in no choice"},
+            "validation": {"nrmse_nominal": nrmse_nom_va, "nrmse_augmented": ctx.to_nrmse(st.mse_ho),
+                           "noise_floor_nrmse": ctx.floor_va},
+            "augmented_over_floor": nrmse_aug / floor if floor > 0 else float("inf")}
+
+
 def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldout: tuple | None = None,
              options: DiagnoseOptions | None = None, units: tuple[str, str] = ("", "")) -> Verdict:
     """Diagnose the gap between a SISO log and a nominal linear model.
@@ -775,23 +1593,13 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     ------
     BadInputError
         For unusable data or models.
+    DiagnosisFailed
+        When the nominal model fails its own check (exit code 1; the payload is the verdict).
     """
     opts = options or DiagnoseOptions()
     say = opts.progress or (lambda msg: None)
     t0 = time.perf_counter()
-    if isinstance(model, dict) and model.get("usable") is False:
-        reasons = model.get("reasons") or model.get("reason") or ["the model file says it is not usable"]
-        reasons = [str(r) for r in (reasons if isinstance(reasons, list) else [reasons])]
-        raise DiagnosisFailed("the nominal model is marked unusable (" + "; ".join(reasons) + "): identify it "
-                              "again from a log that passes its checks, or diagnose without --model",
-                              {"usable": False, "reasons": ["nominal model marked unusable"] + reasons,
-                               "effects": [], "dropped": [], "ambiguous": []})
-    if model is not None:
-        num, den = _as_model(model)
-        source = {"source": "given", "delay_s": _model_delay(model)}
-    else:
-        num = den = None
-        source = {}
+    num, den, source = _nominal_model(model)
     prep = prepare(t_s, u, y, heldout=heldout, model_den=den, target_rate_hz=opts.target_rate_hz,
                    n_blocks=opts.n_blocks, max_samples=opts.max_samples)
     n_work = sum(r.u.size for r in prep.records)
@@ -802,525 +1610,42 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     n_jobs = pool_jobs()
     say(f"estimate: about {_estimate_s(n_work, opts, n_jobs):.0f} s on {n_jobs} unloaded "
         f"{'core' if n_jobs == 1 else 'cores'} (twice that on a busy machine)")
-    clips = flat_extremes(prep.records[0].y)
-    if model is None:
-        prep_id = prep
-        if clips:
-            # clipped samples only bound the output: identify the linear model without them
-            at = np.logical_or.reduce([m for _, m in clips.values()])
-            prep_id = replace(prep, records=[replace(prep.records[0], train=prep.records[0].train & ~at)]
-                              + prep.records[1:])
-            say(f"the output piles up on {', '.join(f'{v:.4g}' for v, _ in clips.values())} "
-                f"({int(at.sum())} samples, a clip): identifying without them")
-        num, den, source = _identify(prep_id, opts, say)
-    clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
-    timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped)
+    num, den, source, timing, clips = _model_stage(prep, num, den, source, opts, say)
     pipe = Pipeline(prep, num, den, delay_s=float(source.get("delay_s", 0.0) or 0.0))
-    identified_model = model is None
 
-    # noise floor from the nominal residual of the log
-    r0 = prep.records[0].y - pipe.simulate({}, 0)
-    sigma2, method = estimate_noise(r0, prep.rate_hz, prep.f_excited_hz)
-    noise_d = noise_trust(r0, prep.rate_hz, prep.f_excited_hz, sigma2, method)
-    # choices are made on the validation samples; "how far" is reported on the final ones
-    y_ho = prep.stacked("y", "valid")
-    y_fi = prep.stacked("y", "hold")
-    if y_ho.size < 10 or y_fi.size < 10:
+    if prep.stacked("y", "valid").size < 10 or prep.stacked("y", "hold").size < 10:
         raise BadInputError("too little held-out data to score a model")
-    norm_ho = float(np.sum((y_ho - y_ho.mean()) ** 2))
-    norm_fi = float(np.sum((y_fi - y_fi.mean()) ** 2))
-    floor_va = math.sqrt(sigma2 * y_ho.size / norm_ho) if norm_ho > 0 else float("inf")
-    floor = math.sqrt(sigma2 * y_fi.size / norm_fi) if norm_fi > 0 else float("inf")
-    say(f"noise floor: rms {math.sqrt(sigma2):.3g} ({method}), NRMSE {floor:.4f}")
-    where = analyse(pipe, sigma2, method)
-    where["level"]["clipped_output"] = {end: {"value": v, "samples": int(m.sum()),
-                                              "share": float(m.mean())} for end, (v, m) in clips.items()}
-    arrays = where.pop("_arrays")
-
-    def scores(eff: dict[str, EffectFit]) -> tuple[float, float, np.ndarray]:
-        """Training and validation mean squared errors, and the validation residual."""
-        e_tr = pipe.residuals(eff, "train")
-        e_ho = pipe.residuals(eff, "valid")
-        return float(np.mean(e_tr ** 2)), float(np.mean(e_ho ** 2)), e_ho
-
-    def final_nrmse(eff: dict[str, EffectFit]) -> float:
-        """NRMSE on the final held-out samples (reported only, never chosen on)."""
-        e = pipe.residuals(eff, "hold")
-        return math.sqrt(float(np.sum(e * e)) / norm_fi) if norm_fi > 0 else float("inf")
-
-    labels_va = _block_labels(prep, "valid")
-    # the slow part left out of the held-out test: opts.wander_s of the log, in stacked validation samples
-    n_all = sum(r.t_s.size for r in prep.records)
-    slow_n = int(round(opts.wander_s * prep.rate_hz * labels_va.size / max(n_all, 1)))
-    # the span of noise correlation the coloured z allows for: a median validation block
-    lag_va = int(np.median(np.bincount(labels_va))) if labels_va.size else 0
-    slow_zc = int(round(opts.wander_zc_s * prep.rate_hz * labels_va.size / max(n_all, 1)))
-    current: dict[str, EffectFit] = {}
-    mse_tr, mse_ho, e_ho = scores(current)
-    clip0 = measured_clip(pipe.clips)
-    mse_nom = mse_ho
-    if identified_model:
-        # a model identified here leaves the log's output offset out (for the static map to
-        # name): the nominal gap that later effects are measured against is that of the model
-        # with its training offset, else any offset-absorbing first effect would leave every
-        # further effect a negligible share of it
-        nominal_offset = float(np.mean(pipe.residuals({}, "train")))
-        mse_nom = min(mse_nom, float(np.mean((e_ho - nominal_offset) ** 2)))
-    nrmse_nom = final_nrmse(current)
-    nrmse_nom_va = math.sqrt(mse_ho * y_ho.size / norm_ho)
-    n_tr = prep.stacked("y", "train").size
-    to_nrmse = lambda m: math.sqrt(max(m, 0.0) * y_ho.size / norm_ho)  # noqa: E731
+    sigma2, method, noise_d, where, arrays = _noise_stage(prep, pipe, clips)
+    ctx = _Context.build(prep, pipe, opts, say, source, den, sigma2, method, model is None)
+    say(f"noise floor: rms {math.sqrt(sigma2):.3g} ({method}), NRMSE {ctx.floor:.4f}")
+    st = _start_state(ctx)
+    nrmse_nom = ctx.final_nrmse({})
+    nrmse_nom_va = ctx.to_nrmse(ctx.scores({})[1])
     say(f"nominal NRMSE {nrmse_nom_va:.4f} (validation), {nrmse_nom:.4f} (final)")
-    if clip0 is not None:
-        # the measured output piles up on its extremes: every fit sees the model clipped there (a
-        # prediction beyond the measured range can only be further from what was measured); whether
-        # to name it is decided at the end
-        current = {"saturation": clip0}
-        mse_tr, mse_ho, e_ho = scores(current)
-        say(f"the measured output piles up on {', '.join(f'{v:.6g} ({k})' for k, v in pipe.clips.items())}: "
-            f"the fits see the model clipped there (validation NRMSE {to_nrmse(mse_ho):.4f})")
-    rounds: list[dict] = []
-    evidence_of: dict[str, tuple] = {}
-    ambiguous: list[dict] = []
 
-    def try_one(base: dict[str, EffectFit], name: str) -> tuple | None:
-        """Fit family ``name`` on top of ``base``: (mse_ho, n_params, name, fit, mse_tr, e_ho, effects) or None."""
-        tc = time.perf_counter()
-        fit = fit_family(pipe, base, name)
-        if fit is None:
-            return None
-        if name == "asymmetric_dynamics" and fit.variant == "output":
-            lo_, hi_ = sorted(fit.theta[:2])
-            if hi_ < opts.asym_ratio_min * (lo_ + 0.5 * prep.dt_s):
-                say(f"  {name}: symmetric lag (taus {fit.theta[0]:.3g}, {fit.theta[1]:.3g} s): not asymmetric")
-                return None
-        eff = dict(base)
-        eff[name] = fit
-        m_tr, m_ho, e_new = scores(eff)
-        if identified:
-            try:
-                alt = relinear(base, name, fit)
-            except ValueError:  # a re-identified model the load family makes unstable, say
-                alt = None
-            if alt is not None:
-                a_tr, a_ho, a_e = scores(alt)
-                if a_tr < m_tr:
-                    eff, fit, m_tr, m_ho, e_new = alt, alt[name], a_tr, a_ho, a_e
-        label = " + ".join([k for k in base if k != LINEAR] + [name]) + (" (re-identified)" if LINEAR in eff else "")
-        say(f"  {label:40s} validation NRMSE {to_nrmse(m_ho):.4f} ({time.perf_counter() - tc:.1f} s)")
-        return (m_ho, fit.n_params, name, fit, m_tr, e_new, eff)
-
-    def try_groups(groups: list[tuple[dict[str, EffectFit], list[str]]]) -> list[list[tuple]]:
-        """:func:`try_all` for several ``(base, names)`` at once, the fits spread over processes
-        (:func:`hasel.diagnose.pool.pmap`, the slowest families first; same results as in series)."""
-        tasks = [(gi, base, n) for gi, (base, names) in enumerate(groups) for n in names]
-        order = sorted(range(len(tasks)), key=lambda i: _SLOW_FIRST.get(tasks[i][2], len(_SLOW_FIRST)))
-        got = dict(zip(order, pmap(lambda i: try_one(tasks[i][1], tasks[i][2]), order)))
-        outs: list[list[tuple]] = [[] for _ in groups]
-        for i, (gi, _, _) in enumerate(tasks):
-            if got[i] is not None:
-                outs[gi].append(got[i])
-        for out in outs:
-            out.sort(key=lambda r: (r[0], r[1]))
-        return outs
-
-    def try_all(base: dict[str, EffectFit], names: list[str], inits: dict | None = None) -> list[tuple]:
-        """Fit each family on top of ``base``: sorted (mse_ho, n_params, name, fit, mse_tr, e_ho, effects)."""
-        return try_groups([(base, names)])[0]
-
-    prior = {n: i for i, n in enumerate(FAMILIES)}
-    identified = source.get("source") != "given"
-
-    def relinear(base: dict[str, EffectFit], name: str, fit: EffectFit) -> dict[str, EffectFit] | None:
-        """An input-side effect fitted jointly with a re-identified linear model.
-
-        A linear model identified first from the same log absorbs what it can of an effect (the
-        phase lag of a hysteresis loop, part of a delay); so, when the model was identified,
-        the effect is also fitted from a plain-gain start and the linear model re-identified
-        through it (twice)."""
-        if name not in INPUT_SIDE or any(k not in INPUT_SIDE + (LINEAR, "load_mass") for k in base):
-            return None
-        from hasel.diagnose.linfit import fit_linear
-
-        ys = np.concatenate([r.y[r.train] for r in prep.records])
-        us = np.concatenate([r.u[r.train] for r in prep.records])
-        k0 = float(us @ ys / max(us @ us, 1e-300))
-        a = 0.3 * np.pi * prep.rate_hz
-        eff = {**base, LINEAR: make_linear([k0 * a], [1.0, a])}
-        order = source.get("details", {}).get("order")
-        orders = ((min(int(order), opts.max_order),) if isinstance(order, (int, np.integer)) and order > 0
-                  else None)
-
-        lin0 = base.get(LINEAR)
-        poles0 = np.roots(split_linear(lin0)[1] if lin0 is not None else den)
-        if orders is not None and poles0.size != orders[0]:
-            poles0 = None
-
-        def reident(e: dict[str, EffectFit], warm_only: bool = False) -> EffectFit | None:
-            recs = [replace(r, u=pipe.stages(e, ri)["x_eff"]) for ri, r in enumerate(prep.records)]
-            try:
-                n2, d2, _ = fit_linear(replace(prep, records=recs), orders=orders, max_order=opts.max_order,
-                                       init_poles=poles0, warm_only=warm_only and poles0 is not None)
-            except (ValueError, np.linalg.LinAlgError):
-                return None
-            return make_linear(n2, d2)
-
-        if name == "time_delay":
-            # a delay trades off against the model's time constants: profile it, re-identifying
-            # the linear model at each delay of a grid, then refine between the best's
-            # neighbours (alternating fits would lock in)
-            cache: dict[float, tuple[float, dict | None]] = {}
-
-            def at(d: float) -> float:
-                d = float(d)
-                if d not in cache:
-                    e = {**base, name: EffectFit(name, "input", (d,))}
-                    lin = reident(e, warm_only=True)  # a profile: many small changes of one input
-                    if lin is None:
-                        cache[d] = (np.inf, None)
-                    else:
-                        e[LINEAR] = lin
-                        for _ in range(2):  # the other effects of the base follow the new linear part
-                            for k2 in [k for k in base if k != LINEAR]:
-                                f2 = fit_family(pipe, {k: v for k, v in e.items() if k != k2}, k2)
-                                if f2 is not None:
-                                    e[k2] = f2
-                        cache[d] = (scores(e)[0], e)
-                return cache[d][0]
-
-            d_hi = max(fit.theta[0], min(0.2 * pipe.span_s, 5.0 * pipe.t_dom), 2 * prep.dt_s)
-            grid = np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, d_hi, 8)]))
-            # the grid's points are independent: in parallel processes (serially inside a worker)
-            cache.update(zip(map(float, grid), pmap(lambda d: (at(d), cache[float(d)])[1], grid)))
-            costs = [at(d) for d in grid]
-            i = int(np.argmin(costs))
-            lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-            if hi_ > lo_:
-                optimize.minimize_scalar(at, bounds=(lo_, hi_), method="bounded",
-                                         options={"maxiter": 8, "xatol": 0.02 * (hi_ - lo_)})
-            best = min(cache.values(), key=lambda ce: ce[0])
-            return best[1]
-        tried = []
-        for _ in range(2):
-            f = fit_family(pipe, eff, name)
-            if f is None:
-                return None
-            eff[name] = f
-            tried.append(dict(eff))  # the first: the effect on a quasi-static gain (no lag to absorb it)
-            lin = reident(eff)
-            if lin is None:
-                break
-            eff[LINEAR] = lin
-        else:
-            f = fit_family(pipe, eff, name)
-            if f is not None:
-                eff[name] = f
-                tried.append(eff)
-        return min(tried, key=lambda e: scores(e)[0]) if tried else None
-
-    def pick(results: list[tuple]) -> tuple:
-        """Lowest validation error; near-ties (1 %) go to fewer parameters, then to the earlier family.
-
-        The family order (FAMILIES) is the tie-break prior: an offset or a curvature that the
-        data cannot place before or after the dynamics is read as the actuator's static map
-        rather than the sensor's.
-        """
-        best = results[0]
-        for r in results[1:]:
-            if r[0] <= 1.01 * best[0] and (r[1] < best[1] or (r[1] == best[1] and r[0] <= 1.005 * best[0]
-                                                              and prior[r[2]] < prior[best[2]])):
-                best = r
-        return best
-
-    for rnd in range(opts.max_effects):
-        if to_nrmse(mse_ho) <= opts.floor_margin * floor_va:
-            say("at the noise floor: no further effect")
-            break
-        if rnd > 0 and mse_ho - sigma2 < min(opts.min_nominal_share, opts.min_nominal_share_near_all) * (mse_nom - sigma2):
-            say("what is left is too small a share of the nominal gap for any further effect")
-            break
-        results = try_all(current, [f for f in FAMILIES if f not in current][:max(opts.top_k, 1)])
-        if rnd == 0:
-            singles = results
-        elif rnd == 1 and opts.pair_pool > 1:
-            # pairs among the best single effects, not only those holding the very best: the best
-            # single augmentation may be soaking up two effects' signatures
-            pool = [r for r in singles[:opts.pair_pool] if r[2] not in current]
-            for got in try_groups([({**{k: v for k, v in current.items() if _fixed(k, v)}, a[2]: a[3]},
-                                     [b[2] for b in pool[i + 1:]]) for i, a in enumerate(pool)]):
-                results += got
-            results.sort(key=lambda r: (r[0], r[1]))
-            # sequential fits of a pair can lock the first effect into soaking up the second:
-            # alternate (refit each given the other) for the most promising pairs, from both
-            # orders, then refine the best few jointly
-            def alternate(eff: dict[str, EffectFit], names_: list[str]) -> dict[str, EffectFit]:
-                for _ in range(2):
-                    for nm in names_:
-                        f2 = fit_family(pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm, init=eff.get(nm))
-                        if f2 is not None:
-                            trial = {**eff, nm: f2}
-                            if scores(trial)[0] <= scores(eff)[0]:
-                                eff = trial
-                return eff
-
-            def improve(r: tuple) -> tuple[float, dict[str, EffectFit]]:
-                names_ = [k for k, v in r[6].items() if not _fixed(k, v)]
-                fixed = {k: v for k, v in r[6].items() if _fixed(k, v)}
-                tries = [alternate(dict(r[6]), names_)]
-                if len(names_) == 2:  # the other order: the second effect fitted alone first
-                    b, a = names_
-                    fa = fit_family(pipe, fixed, a)
-                    fb = fit_family(pipe, {**fixed, a: fa}, b) if fa is not None else None
-                    if fb is not None:
-                        tries.append(alternate({**fixed, a: fa, b: fb}, [a, b]))
-                eff = min(tries, key=lambda e: scores(e)[0])
-                return scores(eff)[0], eff
-
-            # independent of each other: in parallel processes (hasel.diagnose.pool)
-            top = results[:opts.pair_alternate]
-            improved = [(m, r, eff) for r, (m, eff) in zip(top, pmap(improve, top))]
-            improved.sort(key=lambda x: x[0])
-            for i, (_, r, eff) in enumerate(improved):
-                if i < opts.pair_joint:
-                    eff = joint_refine(pipe, eff, max_nfev=opts.pair_joint_nfev)
-                m_tr2, m_ho2, e2 = scores(eff)
-                if m_ho2 < r[0]:
-                    say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {to_nrmse(m_ho2):.4f} "
-                        f"(alternating{' and joint' if i < opts.pair_joint else ''} fits)")
-                    results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
-            results.sort(key=lambda r: (r[0], r[1]))
-        # a static map that is nearly a line (e.g. after a joint refinement) is a linear correction
-        # of the model, not a static nonlinearity: such a set is not a candidate
-        results = [r for r in results if not linear_static(pipe, r[6])]
-        if not results:
-            break
-        m_ho, k, name, fit, m_tr, e_new, eff_new = pick(results)
-        k = sum(f.n_params for f in eff_new.values()) - sum(f.n_params for f in current.values())
-        rounds.append({"round": rnd + 1, "candidates": [
-            {"name": " + ".join(k for k in r[6] if k != LINEAR), "nrmse_validation": to_nrmse(r[0]), "n_params": r[1]}
-            for r in results]})
-        gain = (mse_ho - m_ho) / mse_ho if mse_ho > 0 else 0.0
-        above = max(mse_ho - sigma2, 0.0)
-        gap_share = (mse_ho - m_ho) / above if above > 0 else 0.0
-        nominal_share = (mse_ho - m_ho) / max(mse_nom - sigma2, 1e-300)
-        # against the noise floor: with white noise of variance sigma2 left in the current residual,
-        # the validation SSE drop of a change delta has sd 2 sigma ||delta||
-        delta = e_ho - e_new
-        z = float(np.sum(e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
-        dbic = -(mse_tr - m_tr) * n_tr / sigma2 + k * math.log(n_tr)
-        need = opts.min_first_gain if rnd == 0 else opts.min_next_gain
-        # a share of the nominal gap, or (smaller) if it explains nearly all that is left
-        big_enough = nominal_share >= opts.min_nominal_share or (
-            gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all)
-        t_blk = block_test(e_ho, e_new, labels_va, slow_n)
-        z_col = coloured_z(e_ho, e_new, lag_va, slow_zc)
-        held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
-        ok = gain >= need and gap_share >= opts.min_gap_share and big_enough and held_out_ok and dbic < 0
-        label_new = " + ".join(k for k in eff_new if k != LINEAR)
-        rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
-                           "z": z, "t_block": t_blk, "z_coloured": z_col, "z_coloured": z_col, "delta_bic": dbic, "accepted": bool(ok)})
-        say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
-            f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
-            f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g} -> "
-            f"{'accepted' if ok else 'rejected'}")
-        if not ok:
-            break
-        alike = _alike(results, eff_new, e_new, mse_ho, gain, labels_va, opts, to_nrmse, slow_n)
-        if alike is not None:
-            ambiguous.append(alike)
-            say(f"  {alike['chosen']} and {alike['alternative']} score alike (preference {alike['preference']:.1f}): "
-                f"{alike['experiment']}")
-        r2 = next((r for r in results if r[2] != name), None)
-        for n_new in eff_new:
-            if n_new not in current and n_new != LINEAR:
-                evidence_of[n_new] = (gain, (r2[2], (mse_ho - r2[0]) / mse_ho) if r2 is not None and mse_ho > 0
-                                      else None)
-        for n_old in [n for n in current if n not in eff_new]:
-            evidence_of.pop(n_old, None)
-        current = dict(eff_new)
-        mse_tr, mse_ho, e_ho = m_tr, m_ho, e_new
-        # swaps: with the newcomer in place, could an earlier choice be bettered by another family?
-        for old in [n for n, v in current.items() if n != name and not _fixed(n, v)]:
-            base = {k2: v for k2, v in current.items() if k2 != old}
-            alts = [a for a in try_all(base, [f for f in FAMILIES if f not in current]) if not linear_static(pipe, a[6])]
-            if alts and alts[0][0] < opts.swap_ratio * mse_ho:
-                a = alts[0]
-                say(f"  swap: {a[2]} replaces {old} (validation NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(a[0]):.4f})")
-                rounds[-1].setdefault("swaps", []).append({"out": old, "in": a[2], "nrmse_validation": to_nrmse(a[0])})
-                current = {(a[2] if k2 == old else k2): (a[3] if k2 == old else v) for k2, v in current.items()}
-                evidence_of[a[2]] = evidence_of.pop(old)
-                mse_tr, mse_ho, e_ho = a[4], a[0], a[5]
-
-    # a drift seen directly in the data: the residual changes between repeats of the excitation,
-    # where every time-invariant effect predicts the same output; levels that follow the log's
-    # history let a static map take over the drift's level part, so this asks the repeats
-    def direct_check(kind: str, label: str, trial: dict[str, EffectFit], ok: bool, info: dict, text: str) -> None:
-        """Record a check of a signature seen directly in the data; adopt ``trial`` if ``ok``."""
-        nonlocal current, mse_tr, mse_ho, e_ho
-        m_tr, m_ho, e_new = scores(trial)
-        name = next(k for k in trial if k not in current)
-        gain = (mse_ho - m_ho) / mse_ho if mse_ho > 0 else 0.0
-        rounds.append({"round": len(rounds) + 1, kind: True, "best": label, "accepted": bool(ok), "gain": gain,
-                       "candidates": [{"name": name, "nrmse_validation": to_nrmse(m_ho),
-                                       "n_params": trial[name].n_params}], **info})
-        say(f"{text}; validation NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(m_ho):.4f} -> "
-            f"{'accepted' if ok else 'rejected'}")
-        if ok:
-            evidence_of[name] = (gain, None)
-            current = trial
-            mse_tr, mse_ho, e_ho = m_tr, m_ho, e_new
-
-    rp = where["time"].get("repeats") or {}
-    if (rp.get("repeat_difference_rms") is not None and "charge_drift" not in current
-            and rp["over_noise"] >= opts.repeat_over_noise_min):
-        got = fit_drift_on_repeats(pipe, current, float(rp["period_s"]))
-        if got is not None:
-            drift, st = got
-            b0, b1, n_pairs, fit2 = st["valid"]
-            share = (b0 - b1) / max(b0 - 2.0 * sigma2 * n_pairs, 1e-300)
-            z_rep = (b0 - b1) / (2.0 * math.sqrt(2.0 * sigma2) * max(math.sqrt(fit2), 1e-300))
-            trial = {**current, "charge_drift": drift}
-            for _ in range(2):  # the other effects follow, no longer taking the drift's level part
-                for k2 in [k for k, v in current.items() if not _fixed(k, v)]:
-                    f2 = fit_family(pipe, {kk: vv for kk, vv in trial.items() if kk != k2}, k2, init=trial[k2])
-                    if f2 is not None:
-                        trial[k2] = f2
-            m_ho = scores(trial)[1]
-            t_blk = block_test(e_ho, scores(trial)[2], labels_va, slow_n)
-            z_col = coloured_z(e_ho, scores(trial)[2], lag_va, slow_zc)
-            ok = (share >= opts.repeat_share_min and z_rep >= opts.z_min and m_ho <= opts.repeat_mse_ratio * mse_ho
-                  and (t_blk >= opts.t_min or z_col >= opts.zc_min))
-            direct_check("repeat_check", "charge_drift", trial, ok,
-                         {"period_s": rp["period_s"], "repeat_change_share_explained": share, "z": z_rep,
-                          "t_block": t_blk, "z_coloured": z_col},
-                         f"repeat check: the residual changes between repeats ({rp['over_noise']:.1f} x noise); "
-                         f"a drift explains {100 * share:.0f} % of that change above noise (z {z_rep:.1f})")
-
-    # a clip seen directly in the data (the output piles up on its extreme value) was part of every
-    # fit; it is named where the model goes beyond it there and clipping helps significantly
-    if "saturation" in current and current["saturation"].variant.startswith("measured"):
-        kept = {}
-        r0 = prep.records[0]  # the signature on the samples choices may see (training and validation)
-        seen = r0.train | r0.valid
-        without_all = {k2: v for k2, v in current.items() if k2 != "saturation"}
-        # the nominal model's prediction (with its training offset, if identified here) and the chosen
-        # model's without the clip: either going beyond the limit where the output sits on it
-        preds = [pipe.simulate({}, 0)[seen] + (nominal_offset if identified_model else 0.0),
-                 pipe.simulate(without_all, 0)[seen]]
-        for end, limit in pipe.clips.items():
-            at = (np.abs(r0.y - limit) <= 1e-6 * max(float(np.ptp(r0.y)), 1e-300))[seen]
-            share = max(float(((p > limit) if end == "upper" else (p < limit))[at].mean()) if at.any() else 0.0
-                        for p in preds)
-            others = {e2: v2 for e2, v2 in pipe.clips.items() if e2 != end}
-            base = dict(without_all)
-            if measured_clip(others) is not None:
-                base["saturation"] = measured_clip(others)
-            _, m_without, e_without = scores(base)
-            z = float(np.sum(e_without ** 2 - e_ho ** 2)
-                      / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(e_without - e_ho), 1e-300)))
-            t_blk = block_test(e_without, e_ho, labels_va, slow_n)
-            z_col = coloured_z(e_without, e_ho, lag_va, slow_zc)
-            # the clip is seen directly (samples pile up on one value): held out, it must only help
-            # beyond chance (one-sided 5 %), not pass the test that guards against invented effects
-            ok = (share >= opts.clip_share_min and mse_ho < m_without and z >= opts.z_min
-                  and (t_blk >= opts.t_min or z_col >= 1.645))
-            rounds.append({"round": len(rounds) + 1, "clip_check": True, "end": end, "limit": float(limit),
-                           "share_beyond_at_clip": share, "clipped_samples": int(at.sum()), "z": z, "t_block": t_blk, "z_coloured": z_col,
-                           "gain": (m_without - mse_ho) / m_without if m_without > 0 else 0.0,
-                           "accepted": bool(ok), "candidates": []})
-            say(f"clip check: the output piles up on {limit:.6g} ({end}); a model goes beyond it on "
-                f"{100 * share:.0f} % of those samples; clipping there removes {100 * rounds[-1]['gain']:.1f} % "
-                f"(z {z:.1f}, held-out block score {t_blk:.1f}, coloured-noise z {z_col:.1f}) -> "
-                f"{'named' if ok else 'not named'}")
-            if ok:
-                kept[end] = limit
-        clip = measured_clip(kept)
-        current = dict(without_all)
-        if clip is not None:
-            current["saturation"] = clip
-            evidence_of["saturation"] = (max(r["gain"] for r in rounds if r.get("clip_check")), None)
-        mse_tr, mse_ho, e_ho = scores(current)
-
-    if len(current) > 1 and opts.joint_refine:
-        refined = joint_refine(pipe, current, max_nfev=opts.joint_refine_nfev)
-        m_tr, m_ho, e_new = scores(refined)
-        if m_ho <= mse_ho and not linear_static(pipe, refined):
-            say(f"joint refinement: validation NRMSE {to_nrmse(mse_ho):.4f} -> {to_nrmse(m_ho):.4f}")
-            current, mse_tr, mse_ho, e_ho = refined, m_tr, m_ho, e_new
-
+    _forward_selection(ctx, st)
+    _repeat_check(ctx, st, where)
+    _clip_check(ctx, st)
+    _joint_refine_stage(ctx, st)
     # generalisation: on the final samples, which no choice above saw, every named effect must lower
     # the error of the set it is part of; one that does not is dropped and listed with its numbers
-    def final_sse(eff: dict[str, EffectFit]) -> float:
-        e = pipe.residuals(eff, "hold")
-        return float(np.sum(e * e))
+    current, dropped = _generalise(pipe, st.current, st.evidence_of, ctx.final_sse, ctx.norm_fi, units, say)
+    st.adopt(current, *ctx.scores(current))
+    nuisance = _timing_fold(ctx, st, timing)
+    named = _name_effects(ctx, st, where, units, nuisance)
 
-    current, dropped = _generalise(pipe, current, evidence_of, final_sse, norm_fi, units, say)
-    mse_tr, mse_ho, e_ho = scores(current)
-
-    # rank by importance: the validation loss when an effect is taken out of the final set; each
-    # effect's credit is its own (taken out alone, the others in place), on validation and final
-    def loss_without(n: str) -> float:
-        return scores(_without(current, n))[1]
-
-    sse_nom_fi, sse_all_fi = final_sse({}), final_sse(current)
-    mse_nom_va = scores({})[1]  # the nominal model as given (no offset): the base of every credit
-    # a delay within one original sample is a timing offset (a convention or clock offset), not physics:
-    # it stays in the model as a nuisance and is reported with the timing offset
-    fs_orig = prep.info.get("original_rate_hz", prep.rate_hz)
-    sub = current.get("time_delay")
-    if sub is not None and sub.theta and sub.theta[0] * fs_orig < 1.0:
-        timing["delay_fit_within_one_sample_s"] = float(sub.theta[0])
-        timing["seconds"] = float(timing["seconds"] + sub.theta[0])
-        timing["original_samples"] = float(timing["original_samples"] + sub.theta[0] * fs_orig)
-        say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample: a timing offset, not named")
-    nuisance = {"time_delay"} if "delay_fit_within_one_sample_s" in timing else set()
-    ranked = sorted((n for n in current if n != LINEAR and n not in nuisance), key=loss_without, reverse=True)
-    named: list[dict] = []
-    for i, name in enumerate(ranked):
-        fit = current[name]
-        m_after = final_nrmse({k2: current[k2] for k2 in ranked[:i + 1] + ([LINEAR] if LINEAR in current else [])})
-        gain, runner = evidence_of.get(name, (0.0, None))
-        credit_va = (loss_without(name) - mse_ho) / mse_nom_va if mse_nom_va > 0 else 0.0
-        credit_fi = (final_sse(_without(current, name)) - sse_all_fi) / sse_nom_fi if sse_nom_fi > 0 else 0.0
-        named.append({"name": name, "params": describe_params(pipe, fit, units, effects=current),
-                      "evidence": _evidence(name, fit, where, credit_va, runner, pipe, units, credit_fi),
-                      "nrmse_after": m_after, "gap_removed": gain,
-                      "credit": {"validation": credit_va, "final": credit_fi,
-                                 "note": "share of the nominal model's residual energy that comes back when this "
-                                         "effect alone is taken out of the final set (validation / final samples)"},
-                      "n_params": fit.n_params, "theta": list(fit.theta)})
-
-    nrmse_aug = final_nrmse(current)
-    # exports over the final held-out samples
-    ts, meas, nom, aug = [], [], [], []
-    for ri, rec in enumerate(prep.records):
-        if rec.hold.any():
-            ts.append(rec.t_s[rec.hold])
-            meas.append(rec.y[rec.hold])
-            nom.append(pipe.simulate({}, ri)[rec.hold])
-            aug.append(pipe.simulate(current, ri)[rec.hold])
-    export = {"t_s": np.concatenate(ts), "measured": np.concatenate(meas), "nominal": np.concatenate(nom),
-              "augmented": np.concatenate(aug)}
-    shrink = ((nrmse_nom - nrmse_aug) / (nrmse_nom - floor)) if nrmse_nom > floor else 0.0
-    heldout_d = {"nrmse_nominal": nrmse_nom, "nrmse_augmented": nrmse_aug, "split": prep.split,
-                 "n_samples": int(y_fi.size), "gap_shrink": shrink,
-                 "truncated_to_s": prep.info.get("truncated_to_s"),
-                 "parts": {"train_samples": int(n_tr), "validation_samples": int(y_ho.size),
-                           "final_samples": int(y_fi.size),
-                           "note": "effects are chosen, accepted and ranked on the validation samples; these "
-                                   "NRMSEs (and nrmse_after) are on the final samples, used in no choice"},
-                 "validation": {"nrmse_nominal": nrmse_nom_va, "nrmse_augmented": to_nrmse(mse_ho),
-                                "noise_floor_nrmse": floor_va},
-                 "augmented_over_floor": nrmse_aug / floor if floor > 0 else float("inf")}
+    nrmse_aug = ctx.final_nrmse(st.current)
+    export = _export(ctx, st.current)
+    heldout_d = _heldout_summary(ctx, st, nrmse_nom, nrmse_nom_va, nrmse_aug)
     model_d = {"num": [float(c) for c in num], "den": [float(c) for c in den], **source}
-    if LINEAR in current:
-        n2, d2 = split_linear(current[LINEAR])
+    if LINEAR in st.current:
+        n2, d2 = split_linear(st.current[LINEAR])
         model_d["reidentified"] = {"num": [float(c) for c in n2], "den": [float(c) for c in d2],
                                    "note": "linear part re-identified through the named input-side effects"}
     elapsed = time.perf_counter() - t0
-    verdict_kw = dict(effects=named, where=where, heldout=heldout_d, noise_floor_nrmse=floor, model=model_d,
-                      rounds=rounds, working_rate_hz=prep.rate_hz, elapsed_s=elapsed, timing_offset=timing,
-                      dropped=dropped, ambiguous=ambiguous, noise=noise_d,
+    verdict_kw = dict(effects=named, where=where, heldout=heldout_d, noise_floor_nrmse=ctx.floor, model=model_d,
+                      rounds=st.rounds, working_rate_hz=prep.rate_hz, elapsed_s=elapsed, timing_offset=timing,
+                      dropped=dropped, ambiguous=st.ambiguous, noise=noise_d,
                       test={"max_effects": opts.max_effects, "t_min": opts.t_min,
                             "false_alarm_rate": opts.false_alarm_note,
                             "statistic": "held-out block score: paired over the validation blocks with block "
@@ -1334,6 +1659,6 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         raise DiagnosisFailed(reason + ": check the model's units and signs, or identify one from a log "
                               "with steps and a sweep through the band", payload)
     say(f"done in {elapsed:.1f} s: {', '.join(e['name'] for e in named) or 'no effect'}; final held-out NRMSE "
-        f"{nrmse_nom:.4f} -> {nrmse_aug:.4f} (floor {floor:.4f})")
-    plots = {"arrays": arrays, "pipe": pipe, "current": current}
+        f"{nrmse_nom:.4f} -> {nrmse_aug:.4f} (floor {ctx.floor:.4f})")
+    plots = {"arrays": arrays, "pipe": pipe, "current": st.current}
     return Verdict(**verdict_kw, export=export, plots=plots)
