@@ -1,6 +1,6 @@
 """Tuning cases of the diagnosis for the failure kinds of issue 14 item 4 (a tuning set, not verification).
 
-Built on the independent simulator :mod:`hasel.othersim` (its chain and excitation), with
+Built on the independent simulator :mod:`hasel_bench.othersim` (its chain and excitation), with
 forms it does not draw itself:
 
 - ``pole_load``: one of P(s)'s pole pairs gets the added inertia so that its frequency falls
@@ -9,7 +9,7 @@ forms it does not draw itself:
   voltage (4.6-5.6 kV) before the actuator (an input-side hard limit);
 - pairs ``load + drift`` and ``slew + lag`` (an amplifier slew limit beside a direction-
   dependent lag), and triples;
-- effect-free logs of several designs (:func:`hasel.othersim.make_free_case`).
+- effect-free logs of several designs (:func:`hasel_bench.othersim.make_free_case`).
 
 Every case is written as an unlabelled ``.npz`` like othersim's and diagnosed with the
 nominal P(s). Run ``python bench/tune_diag/cases.py --out DIR [--only KIND,...]``; it
@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from hasel import othersim as o
+from hasel_bench import othersim as o
 from hasel import paper
 
 F = o.ForeignEffect
@@ -106,7 +106,7 @@ FREE = 8
 def make(directory: str, seed: int = 7, n_free: int = FREE, free_s: float | None = 20.0) -> list[dict]:
     """Write every case's file to ``directory``; returns their labels (kept here, not in the files).
 
-    ``n_free`` effect-free logs of :data:`hasel.othersim.FREE_DESIGNS` in turn, ``free_s`` long
+    ``n_free`` effect-free logs of :data:`hasel_bench.othersim.FREE_DESIGNS` in turn, ``free_s`` long
     (None: othersim's own lengths, 40 s up to 1 kHz, 20 s above)."""
     out = []
     for i, kind in enumerate(KINDS):

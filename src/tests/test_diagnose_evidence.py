@@ -1,6 +1,6 @@
 """Diagnosis selection with frequency-domain evidence: a changed resonance is not read as timing or delay.
 
-Logs come from the independent simulator's first-order-hold discretisation (hasel.othersim.FohSystem) of
+Logs come from the independent simulator's first-order-hold discretisation (hasel_bench.othersim.FohSystem) of
 P(s) with its double resonance pair made heavier (frequency and damping ratio lowered together, static gain
 kept), the way a load changes it."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.diagnose.core import timing_stage
 from hasel.diagnose.prep import prepare
 from hasel.effects.load import loaded_den
-from hasel.othersim import FohSystem, excitation
+from hasel_bench.othersim import FohSystem, excitation
 
 RATE = 500.0
 

@@ -81,13 +81,13 @@ class DiagnoseOptions:
     """Settings of :func:`diagnose`, each with how it was set and on which data.
 
     Provenance key: **[blind]** tuned on the project's own blind check
-    (:mod:`hasel.diagnose.blind`, the effect library's forms, its default run);
+    (:mod:`hasel_bench.blind`, the effect library's forms, its default run);
     **[tune_diag]** checked on ``bench/tune_diag/cases.py`` (seed 7: pole-shift loads of one
     and of both resonance pairs, voltage clips, load + drift, slew + lag, triples, effect-free
-    logs; built on :mod:`hasel.othersim`); **[other]** checked on the
-    independent simulator's effect cases (:mod:`hasel.othersim`, ``run_othersim`` seed 0, 28
+    logs; built on :mod:`hasel_bench.othersim`); **[other]** checked on the
+    independent simulator's effect cases (:mod:`hasel_bench.othersim`, ``run_othersim`` seed 0, 28
     cases); **[free]** calibrated on its effect-free logs of several designs
-    (:func:`hasel.othersim.make_free_case`: paper protocol, chirp, multisine, PRBS and
+    (:func:`hasel_bench.othersim.make_free_case`: paper protocol, chirp, multisine, PRBS and
     closed-loop logs; white, coloured noise and slow sensor wander; 200 Hz-5 kHz; ZOH, FOH
     and centred sampling; fractional timing offsets); **[design]** a structural choice, not
     tuned. No threshold was set on ``bench/verify``.

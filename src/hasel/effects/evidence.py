@@ -73,7 +73,7 @@ def load_or_delay(ctx: FitContext, effects: dict[str, EffectFit], den) -> dict:
     magnitude nor phase moves; else ``"unclear"``. It chooses between these two linear
     readings only: a nonlinear effect moves the linear ratio too (its gap reads as
     ``"load_mass"`` or ``"unclear"``), so it is evidence for a load *against a delay*, not
-    a detector. On the tuning corpus (``python -m hasel.othersim``, seed 0, nominal model):
+    a detector. On the tuning corpus (``python -m hasel_bench.othersim``, seed 0, nominal model):
     both delays read ``time_delay`` (19.4 and 19.0 ms, magnitude 0.07 and 0.05 dB RMS),
     both loads ``load_mass`` (1.1 and 4.6 dB, 5.9 and 20.9 degrees left after a delay),
     all six effect-free logs ``none``.

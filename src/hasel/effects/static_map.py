@@ -36,7 +36,7 @@ __all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "map_sides", "Intern
 #: only its offset is kept.
 NEAR_LINEAR_SHARE = 0.1
 #: A side of the dynamics is told apart when the runner-up side leaves this many times the best's
-#: remaining error: set on the tuning corpus (``python -m hasel.othersim``, seed 0), where the four
+#: remaining error: set on the tuning corpus (``python -m hasel_bench.othersim``, seed 0), where the four
 #: single-map cases (knee and power input maps, exponential and quadratic sensor curves) gave
 #: 1.40-2.45 with the right side best, and the map-plus-another-effect pairs 1.03-1.14.
 SIDES_SEPARABLE = 1.3
