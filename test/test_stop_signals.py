@@ -173,3 +173,31 @@ def test_a_node_stopped_by_a_signal_commands_0_kv_and_exits_128_plus_the_signal(
     assert "Traceback" not in err and f"stopped by {sig}" in err.splitlines()[-1]
     last = got[-1]
     assert last.applied_kv == 0.0 and last.reason == VoltageCommand.REASON_SHUTDOWN
+
+
+def test_hasel_demo_stopped_during_its_diagnosis_exits_128_plus_the_signal(tmp_path):
+    """The demo runs ``hasel diagnose`` (forked fitting processes) inside its own process: SIGTERM
+    there stops the demo itself with 143 and one "stopped" line, not a "failed" stage or a hang;
+    the logs it recorded before are complete files at <= 9 kV."""
+    out = tmp_path / "demo"
+    log = tmp_path / "stdout.txt"
+    with log.open("w") as fh:
+        proc = subprocess.Popen([HASEL, "demo", "--quick", "--out", str(out)], stdout=fh,
+                                stderr=subprocess.PIPE, text=True, env=_env(), preexec_fn=default_sigint)
+    try:
+        deadline = time.monotonic() + 400.0
+        while "$ hasel diagnose" not in log.read_text():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the demo never reached its diagnosis"
+            time.sleep(0.2)
+        time.sleep(3.0)  # well inside the diagnosis's fits
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "hasel demo: stopped by SIGTERM" in err and "failed" not in err, err
+    for name in ("truth_chirp.mcap", "truth_heldout.mcap"):
+        n, top = recorded_kv(out / name)
+        assert n > 1000 and 0.0 < top <= 9.0, (name, n, top)

@@ -27,6 +27,22 @@ from pathlib import Path
 __all__ = ["run"]
 
 
+def _hasel(argv: list[str], what: str) -> None:
+    """Run ``hasel ARGV`` in this process; a failure raises ``HaselError(what)``.
+
+    A run stopped by a signal (exit 128 + N) raises :class:`hasel.interrupt.Interrupted`
+    again, so the demo stops too and exits 128 + N instead of reporting a failure."""
+    from hasel import interrupt
+    from hasel.cli import main as hasel_main
+    from hasel.errors import HaselError
+
+    code = hasel_main(argv)
+    if code > 128:
+        raise interrupt.Interrupted(code - 128)
+    if code != 0:
+        raise HaselError(what)
+
+
 def _section(title: str) -> None:
     print(f"\n== {title} " + "=" * max(0, 70 - len(title)))
 
@@ -80,7 +96,6 @@ def _identify_stage(out: Path, quick: bool) -> dict:
     import numpy as np
 
     from hasel import paper
-    from hasel.errors import HaselError
     from hasel.lti import tf_freqresp
     from hasel.signals import protocol_schedule
     from hasel_sysid.chirp import run_chirp
@@ -91,12 +106,10 @@ def _identify_stage(out: Path, quick: bool) -> dict:
     res = run_chirp(sched, str(log), quiet=True)
     print(f"recorded {len(offsets)} operating points x 3 chirps (paper formula), {res['simulated_s']:.0f} s "
           f"simulated at 10 kHz in {res['wall_s'] or 0:.1f} s -> {log}")
-    from hasel.cli import main as hasel_main
 
     print(f"$ hasel identify {log} --json {out / 'model.json'} --plot {out / 'bode.png'} --report {out / 'identify'}")
-    if hasel_main(["identify", str(log), "--json", str(out / "model.json"), "--plot", str(out / "bode.png"),
-                   "--report", str(out / "identify")]) != 0:
-        raise HaselError("identification of the demo's own log failed")
+    _hasel(["identify", str(log), "--json", str(out / "model.json"), "--plot", str(out / "bode.png"),
+            "--report", str(out / "identify")], "identification of the demo's own log failed")
     model = json.loads((out / "model.json").read_text())
     f = np.geomspace(0.1, 15.0, 200)
     ratio = tf_freqresp(model["num"], model["den"], f) / tf_freqresp(*paper.plant_tf(), f)
@@ -107,8 +120,6 @@ def _identify_stage(out: Path, quick: bool) -> dict:
 
 def _gap_stage(out: Path, quick: bool) -> dict:
     """Closed loop and chirps on the truth plant; diagnosis against the nominal model."""
-    from hasel.cli import main as hasel_main
-    from hasel.errors import HaselError
     from hasel.plantspec import describe, make_actuator
     from hasel.signals import protocol_schedule
     from hasel_sysid.chirp import run_chirp
@@ -143,8 +154,7 @@ def _gap_stage(out: Path, quick: bool) -> dict:
             "--export-sim", str(out / "gap_sim.csv"), "--report", str(out / "diagnose"),
             "--export-plant", str(out / "augmented.json")]
     print("$ hasel " + " ".join(argv))
-    if hasel_main(argv) != 0:
-        raise HaselError("the diagnosis of the demo's own logs failed")
+    _hasel(argv, "the diagnosis of the demo's own logs failed")
     verdict = json.loads((out / "verdict.json").read_text())
     named = [e["name"] for e in verdict["effects"]]
     ho = verdict["heldout"]
@@ -187,8 +197,6 @@ def _retune_stage(out: Path, quick: bool) -> dict:
     """compare (nominal vs augmented) on the truth log; tune on the augmented plant; the tuned gains on truth."""
     import math
 
-    from hasel.cli import main as hasel_main
-    from hasel.errors import HaselError
     from hasel.tune import read_gains
     from hasel_sysid.steps import plot_steps, run_steps
 
@@ -198,8 +206,7 @@ def _retune_stage(out: Path, quick: bool) -> dict:
             "--plot", str(out / "compare.png"), "--overwrite"]
     print("the truth actuator's closed-loop steps (stage 4, recorded) replayed with the nominal and the augmented plant")
     print("$ hasel " + " ".join(argv))
-    if hasel_main(argv) != 0:
-        raise HaselError("hasel compare on the demo's own log failed")
+    _hasel(argv, "hasel compare on the demo's own log failed")
     cmp = json.loads((out / "compare.json").read_text())
     table, closer = _gap_table(cmp)
     nrmse = [p["stroke_nrmse"] for p in cmp["plants"]]
@@ -213,8 +220,7 @@ def _retune_stage(out: Path, quick: bool) -> dict:
     argv = ["tune", "--plant", str(aug), "--hold", f"{hold:g}", "--max-evals", str(evals),
             "--out", str(out / "gains.yaml"), "--json", str(out / "tune.json"), "--overwrite"]
     print("\n$ hasel " + " ".join(argv))
-    if hasel_main(argv) != 0:
-        raise HaselError("hasel tune on the augmented plant failed")
+    _hasel(argv, "hasel tune on the augmented plant failed")
 
     gains = read_gains(out / "gains.yaml")
     print(f"\nthe tuned gains ({out / 'gains.yaml'}) on the truth actuator, through the node graph:")
