@@ -1130,8 +1130,12 @@ def _relinear(ctx: _Context, base: dict[str, EffectFit], name: str, fit: EffectF
 
         d_hi = max(fit.theta[0], min(0.2 * pipe.span_s, 5.0 * pipe.t_dom), 2 * prep.dt_s)
         grid = np.unique(np.concatenate([[fit.theta[0]], np.geomspace(prep.dt_s, d_hi, 8)]))
-        # the grid's points are independent: in parallel processes (serially inside a worker)
-        cache.update(zip(map(float, grid), pmap(lambda d: (at(d), cache[float(d)])[1], grid)))
+        # the grid's points are independent: filled in parallel processes (serially inside a worker)
+        def entry(d: float) -> tuple[float, dict | None]:
+            at(d)
+            return cache[float(d)]
+
+        cache.update(zip(map(float, grid), pmap(entry, grid)))
         costs = [at(d) for d in grid]
         i = int(np.argmin(costs))
         lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
