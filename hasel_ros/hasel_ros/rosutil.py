@@ -9,6 +9,7 @@ from __future__ import annotations
 import array
 import math
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -246,6 +247,25 @@ def _stop_on_signals(wake: Callable[[], None]) -> tuple[dict[str, int], Callable
     return state, restore
 
 
+def _flush_publishers(node: Node, timeout_s: float = 1.0) -> None:
+    """Wait (at most ``timeout_s`` s in all) until reliable subscribers acknowledged what was published.
+
+    Destroying a node right after its last publish can drop that message before DDS delivered
+    it; the last message of a stopped amplifier is its 0 kV command, which must arrive.
+    """
+    from rclpy.duration import Duration
+
+    end = time.monotonic() + timeout_s
+    for pub in list(node.publishers):
+        left = end - time.monotonic()
+        if left <= 0:
+            return
+        try:
+            pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+        except Exception:  # noqa: BLE001 - a context already gone at exit: nothing left to flush
+            return
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Standard Jazzy main: init, spin one node, clean shutdown on SIGINT, SIGTERM or SIGHUP.
 
@@ -296,6 +316,7 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             shutdown = getattr(node, "on_shutdown", None)
             if shutdown is not None:
                 shutdown()  # context still valid: the last command (0 kV) goes out, files close
+            _flush_publishers(node)
             if executor is not None:
                 executor.remove_node(node)
             node.destroy_node()
