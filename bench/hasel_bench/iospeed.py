@@ -20,6 +20,7 @@ import numpy as np
 from hasel.io.loader import load_signals
 from hasel.io.msgdefs import message_definition
 from hasel.io.writer import DEFAULT_CHUNK_SIZE, Ros2McapWriter
+from hasel.timeconv import s_to_ns
 
 __all__ = ["writer_overhead", "load_speed", "encode", "encode_sample_batch"]
 
@@ -160,7 +161,7 @@ def load_speed(segments: int = 18, segment_s: float = 60.0, rate_hz: float = 10_
     rng = np.random.default_rng(2)
     n_msgs = int(round(segments * segment_s * rate_hz / batch))
     period = 1.0 / rate_hz
-    step_ns = int(round(batch * period * 1e9))
+    step_ns = s_to_ns(batch * period)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "campaign.mcap"
         t0 = time.perf_counter()

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from hasel import paper
+from hasel.timeconv import ns_to_stamp, s_to_ns
 
 __all__ = ["core_vs_lsim", "write_campaign", "ident_vs_load", "CAMPAIGN_GAINS"]
 
@@ -105,15 +106,15 @@ def write_campaign(path: str | os.PathLike[str], gain: float = 1.0, seed: int = 
     v = out.applied_kv[:n * per].reshape(n, per)
     y = laser[:n * per].reshape(n, per)
     z = out.stroke_mm[:n * per].reshape(n, per)
-    period_ns = int(round(paper.LOOP_PERIOD_S * 1e9))
-    dt_ns = int(round(1e9 / paper.PLANT_RATE_HZ))
+    period_ns = s_to_ns(paper.LOOP_PERIOD_S)
+    dt_ns = s_to_ns(1.0 / paper.PLANT_RATE_HZ)
     with Ros2McapWriter(path, fsync_interval_s=None) as w:
         mk = w.add_topic("/markers", "hasel_msgs/msg/ExperimentMarker")
         for r in sched.records:
             for start, t in ((True, r.start_s), (False, r.end_s)):
-                tn = int(round(t * 1e9))
+                tn = s_to_ns(t)
                 w.write(mk, encode("hasel_msgs/msg/ExperimentMarker", {
-                    "header": {"stamp": {"sec": tn // 10**9, "nanosec": tn % 10**9}}, "label": r.kind,
+                    "header": {"stamp": dict(zip(("sec", "nanosec"), ns_to_stamp(tn)))}, "label": r.kind,
                     "signal": r.excitation or "constant", "offset_kv": float(r.offset),
                     "amplitude_kv": 1.0 if r.kind == "excitation" else 0.0, "f0_hz": float(f0_hz), "f1_hz": 20.0,
                     "duration_s": float(duration_s), "start": start}), tn, tn)

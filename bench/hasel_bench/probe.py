@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 
+from hasel.timeconv import stamp_to_ns
 from sim_plant.plant_node import PlantNode
 
 __all__ = ["MeasuredPlant"]
@@ -52,7 +53,7 @@ class MeasuredPlant(PlantNode):
         self._answer(msg.header.stamp)
 
     def _answer(self, stamp) -> None:
-        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        ns = stamp_to_ns(stamp.sec, stamp.nanosec)
         if self.clock_mode == "wall" and ns == self._wall_tick_ns:
             self.latencies_ns.append(self.get_clock().now().nanoseconds - ns)
             self._answered = True

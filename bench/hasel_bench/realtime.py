@@ -54,6 +54,7 @@ import numpy as np
 
 from hasel import paper
 from hasel.errors import HaselError
+from hasel.timeconv import ns_to_s
 
 __all__ = ["WorkerSpec", "run_worker", "run_layout", "latency_summary", "busy_loop_process", "PERIOD_S"]
 
@@ -262,8 +263,8 @@ def run_worker(spec: WorkerSpec, go: Callable[[], float] | None = None,
             loops.append({"ns": p.get_namespace(), "latencies_us": [x / 1e3 for x in p.latencies_ns],
                           "missed": int(p.missed_periods), "ticks": int(p.ticks), "expected": expected,
                           "skipped": int(p.skipped_periods),
-                          "missed_at_s": [x * 1e-9 - w0 for x in p.missed_at_ns],
-                          "skipped_at_s": [x * 1e-9 - w0 for x in p.skipped_at_ns]})
+                          "missed_at_s": [ns_to_s(x) - w0 for x in p.missed_at_ns],
+                          "skipped_at_s": [ns_to_s(x) - w0 for x in p.skipped_at_ns]})
         result = {"loops": loops, "cpu_s": cpu, "wall_s": wall, "setup_s": setup_s, "nodes": len(nodes),
                   "scheduler": sched, "t_start": w0,
                   # collections of 1 ms or more: (s from the window's start, generation, ms)

@@ -261,7 +261,7 @@ def _flush_publishers(node: Node, timeout_s: float = 1.0) -> None:
         if left <= 0:
             return
         try:
-            pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+            pub.wait_for_all_acked(Duration(nanoseconds=s_to_ns(left)))
         except Exception:  # noqa: BLE001 - a context already gone at exit: nothing left to flush
             return
 
