@@ -247,18 +247,20 @@ class Pipeline:
         sim = self.loaded(mu, kappa, lin)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         if f is not None and len(f.theta) > 2:  # the load's weight: a static offset (a sag)
+            key += ("sag",) + f.theta[2:]
             y = y + f.theta[2]
         out["y_lin"] = y
         f = e.get("static_nonlinearity")
         if f is not None and f.variant == "internal":
+            key += ("mn",) + f.theta
             w = (y - self.y_c) / self.y_s
             y = y + self.unit(sim).run(self.y_s * poly_map(f.theta, w))
         out["y_int"] = y
         f = e.get("asymmetric_dynamics")
-        if f is not None and f.variant.startswith("rate_limit"):
-            y = speed_limit(y, f.theta[0], self.prep.dt_s, f.variant.split(":")[1])
-        elif f is not None:
-            y = _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
+        if f is not None:
+            # a state-dependent recursion: kept for the fits that hold it fixed (of the stages after it)
+            key += ("a", f.variant) + f.theta
+            y = self._memo(("ya", ri) + key, lambda y=y, f=f: self._asym(y, f))
         out["y_asym"] = y
         f = e.get("charge_drift")
         if f is not None:
@@ -279,6 +281,12 @@ class Pipeline:
         out["y"] = y
         self.n_evals += 1
         return out
+
+    def _asym(self, y: np.ndarray, f: EffectFit) -> np.ndarray:
+        """The asymmetric-dynamics stage ``f`` applied to the output ``y`` (speed limit or lag)."""
+        if f.variant.startswith("rate_limit"):
+            return speed_limit(y, f.theta[0], self.prep.dt_s, f.variant.split(":")[1])
+        return _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
 
     def unit(self, sim: LinearSim) -> "LinearSim | _Scaled":
         """``sim`` scaled to unit DC gain (or unscaled if its DC gain is ~0)."""

@@ -142,13 +142,280 @@ class BoucWen:
         return out
 
 
+class _FallingLaw:
+    """A falling step law for :func:`_shoot_lag`: ``a(z)`` (the step's share of ``x - z``) and ``da/dz``.
+
+    ``kind`` ``"const"``: ``a = a_dn``; ``"linear"`` (the truth form): ``dt / (tau + dt)``,
+    ``tau = tau_down (1 + L max(0, 1 - z / ref))`` (1 where ``tau <= 0``); ``"exp"`` (the
+    generic form): ``dt / (T + dt)``, ``T = tau_down exp(k clip((z - c) / s, -2, 2))``. The
+    vector arithmetic is the scalar loops' own, in the same order.
+    """
+
+    def __init__(self, kind: str, dt_s: float = 1.0, tau_down_s: float = 0.0, slope: float = 0.0,
+                 centre: float = 0.0, scale: float = 1.0, a_dn: float = 1.0) -> None:
+        self.kind, self.dt, self.tau, self.k = kind, float(dt_s), float(tau_down_s), float(slope)
+        self.c, self.inv, self.a_dn = float(centre), 1.0 / float(scale), float(a_dn)
+
+    def a(self, z: np.ndarray) -> np.ndarray:
+        """Falling step shares at states ``z``."""
+        if self.kind == "const":
+            return np.full(z.shape, self.a_dn)
+        if self.kind == "linear":
+            g = 1.0 - z * self.inv
+            tau = self.tau * (1.0 + self.k * np.maximum(g, 0.0))
+            pos = tau > 0
+            return np.where(pos, self.dt / (np.where(pos, tau, 1.0) + self.dt), 1.0)
+        w = (z - self.c) * self.inv
+        np.minimum(w, 2.0, out=w)
+        np.maximum(w, -2.0, out=w)
+        w *= self.k
+        big = self.tau * np.exp(w, out=w)
+        big += self.dt
+        return np.divide(self.dt, big, out=big)
+
+    def scalar(self, z: float) -> float:
+        """The falling step share at one state ``z`` (the scalar loops' expression)."""
+        if self.kind == "const":
+            return self.a_dn
+        if self.kind == "linear":
+            g = 1.0 - z * self.inv
+            tau = self.tau * (1.0 + self.k * (g if g > 0.0 else 0.0))
+            return self.dt / (tau + self.dt) if tau > 0 else 1.0
+        w = (z - self.c) * self.inv
+        if w > 2.0:
+            w = 2.0
+        elif w < -2.0:
+            w = -2.0
+        return self.dt / (self.tau * math.exp(self.k * w) + self.dt)
+
+    def da(self, z: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``da/dz`` at states ``z`` with shares ``a`` (for the Newton steps only: need not be exact)."""
+        if self.kind == "const":
+            return np.zeros(z.shape)
+        if self.kind == "linear":
+            g = 1.0 - z * self.inv
+            return np.where((g > 0.0) & (a < 1.0), a * a / self.dt * (self.tau * self.k * self.inv), 0.0)
+        # T = dt (1 - a) / a, dT/dz = T k / s, da/dz = -a^2 / dt dT/dz
+        w = (z - self.c) * self.inv
+        inside = (w < 2.0) & (w > -2.0)
+        return np.where(inside, -(a * (1.0 - a)) * (self.k * self.inv), 0.0)
+
+
+#: Samples per segment of :func:`_shoot_lag`'s sweeps, and the shortest signal it is used on.
+_SEG = 64
+_MIN_SHOOT = 4096
+#: Segments still moving after a sweep below which the rest is repaired one sample at a time.
+_REPAIR = 48
+
+
+def _shoot_lag(xs: np.ndarray, z0: float, a_up: float, law: _FallingLaw, max_sweeps: int = 6) -> np.ndarray:
+    """The direction-dependent lag ``z_k = z_{k-1} + a (x_k - z_{k-1})`` by multiple shooting.
+
+    ``a = a_up`` while ``x_k > z_{k-1}``, else ``law.a(z_{k-1})``. The signal is cut into
+    segments of :data:`_SEG` samples, all stepped at once (one vector operation per sample
+    position instead of one Python step per sample) from guessed start states; a start
+    that differs from the end of the segment before is corrected by a Newton step through
+    the segments' end sensitivities (``dz_end / dz_start``, exactly 0 after a rise with
+    ``a_up = 1``), and only the segments whose start moved are stepped again. The steps
+    are the recursion's own arithmetic, so once every start matches the previous end (to
+    a few units in the last place of the signal's scale) the samples are the recursion's.
+    When few segments still move (:data:`_REPAIR`), or after ``max_sweeps`` sweeps, the
+    rest is done one sample at a time in order (:func:`_repair`): exact, and in the worst
+    case as slow as the plain recursion.
+    """
+    n = xs.size
+    L = _SEG
+    M = -(-n // L)
+    X = np.empty(M * L)
+    X[:n] = xs
+    X[n:] = xs[-1]
+    XT = np.ascontiguousarray(X.reshape(M, L).T)  # row j: sample j of every segment
+    ZT = np.empty((L, M))
+    s = np.empty(M)
+    s[0] = z0
+    s[1:] = XT[-1, :-1]  # guess: the input at the end of the segment before
+    scale = max(float(np.max(np.abs(xs))), abs(z0), 1e-300)
+    tol = 8.0 * np.finfo(float).eps * scale
+    idx = None  # all segments
+    for _ in range(max_sweeps):
+        Xa = XT if idx is None else XT[:, idx]
+        Za = np.empty_like(Xa)
+        z = s.copy() if idx is None else s[idx]
+        for j in range(L):
+            xj = Xa[j]
+            d = xj - z
+            a = law.a(z)
+            a[d > 0.0] = a_up
+            d *= a
+            z = z + d
+            Za[j] = z
+        # each segment's sensitivity of its end to its start: the product of the steps' slopes
+        Zp = np.empty_like(Za)
+        Zp[0] = s if idx is None else s[idx]
+        Zp[1:] = Za[:-1]
+        D = Xa - Zp
+        A = law.a(Zp.reshape(-1)).reshape(Zp.shape)
+        slope = 1.0 - A + law.da(Zp.reshape(-1), A.reshape(-1)).reshape(Zp.shape) * D
+        slope[D > 0.0] = 1.0 - a_up
+        sens = np.prod(slope, axis=0)
+        if idx is None:
+            ZT[:] = Za
+            S = sens
+        else:
+            ZT[:, idx] = Za
+            S[idx] = sens
+        # starts against the ends before them; a Newton step along the chain of segments
+        ends = ZT[-1].tolist()
+        sl, Sl = s.tolist(), S.tolist()
+        ds = [0.0] * M
+        moved = []
+        prev = 0.0
+        for m in range(1, M):
+            dm = ends[m - 1] + Sl[m - 1] * prev - sl[m]
+            if -tol <= dm <= tol:
+                dm = 0.0
+            else:
+                moved.append(m)
+            ds[m] = dm
+            prev = dm
+        if len(moved) <= _REPAIR:
+            break
+        idx = np.array(moved)
+        s[idx] += np.asarray(ds)[idx]
+    _repair(XT, ZT, a_up, law, 0.0 if law.kind != "exp" else tol)
+    return ZT.T.reshape(-1)[:n].copy()
+
+
+def _repair(XT: np.ndarray, ZT: np.ndarray, a_up: float, law: _FallingLaw, tol: float) -> None:
+    """Make the segments (columns of ``ZT``) continue each other: in order, a segment whose first
+    step did not start from the end of the one before is stepped again one sample at a time from
+    that end, until its samples meet the stored ones (equal, or within ``tol``; from there on the
+    same steps follow). With ``tol = 0`` the result is the plain recursion's, bit for bit, as far
+    as the vector steps are (the constant and linear laws: the same operations in the same order)."""
+    L, M = ZT.shape
+    z_end = float(ZT[L - 1, 0])
+    step = law.scalar
+    for m in range(1, M):
+        col = ZT[:, m]
+        x = XT[:, m]
+        # the first step from the previous end, against the stored first sample
+        z = z_end
+        j = 0
+        while j < L:
+            d = float(x[j]) - z
+            z += d * (a_up if d > 0.0 else step(z))
+            old = float(col[j])
+            if z == old or abs(z - old) <= tol:
+                break
+            col[j] = z
+            j += 1
+        z_end = float(col[L - 1])
+
+
+def _lag_loop(xs: np.ndarray, z: float, a_up: float, a_dn: float) -> np.ndarray:
+    """The constant-time-constant recursion, one sample at a time (the definition)."""
+    out: list[float] = []
+    append = out.append
+    for xi in xs.tolist():
+        d = xi - z
+        z += d * (a_up if d > 0.0 else a_dn)
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def _lag_loop_linear_level(xs: np.ndarray, z: float, a_up: float, dt_s: float, tau_down_s: float,
+                           level_dependence: float, level_ref: float) -> np.ndarray:
+    """The truth form's level-dependent recursion, one sample at a time (the definition)."""
+    out: list[float] = []
+    append = out.append
+    inv_ref = 1.0 / level_ref
+    for xi in xs.tolist():
+        d = xi - z
+        if d > 0.0:
+            z += d * a_up
+        else:
+            g = 1.0 - z * inv_ref
+            tau = tau_down_s * (1.0 + level_dependence * (g if g > 0.0 else 0.0))
+            z += d * (dt_s / (tau + dt_s) if tau > 0 else 1.0)
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def exp_level_lag_loop(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, k: float, y_c: float,
+                       y_s: float, z0: float) -> np.ndarray:
+    """:func:`exp_level_lag` one sample at a time (the definition; the reference of the fast kernel)."""
+    a_up = 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
+    z = float(z0)
+    out: list[float] = []
+    append = out.append
+    inv = 1.0 / y_s
+    exp = math.exp
+    for xi in np.asarray(x, float).tolist():
+        d = xi - z
+        if d > 0.0:
+            z += d * a_up
+        else:
+            w = (z - y_c) * inv
+            if w > 2.0:
+                w = 2.0
+            elif w < -2.0:
+                w = -2.0
+            z += d * (dt_s / (tau_down_s * exp(k * w) + dt_s))
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def _lag_start(x: np.ndarray, dt_s: float, tau_up_s: float, z0: float | None) -> tuple[np.ndarray, float, float]:
+    """The input as floats, the initial output (default ``x[0]``; 0 for an empty input) and the
+    rising step share ``1 - exp(-dt / tau_up)`` (1 for ``tau_up <= 0``)."""
+    xs = np.asarray(x, float)
+    z = (float(xs[0]) if xs.size else 0.0) if z0 is None else float(z0)
+    return xs, z, 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
+
+
+def exp_level_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, k: float, y_c: float,
+                  y_s: float, z0: float | None = None) -> np.ndarray:
+    """Lag with ``tau_up_s`` while rising and ``tau_down_s exp(k w)`` while falling, ``w = (z - y_c) / y_s``
+    clipped to [-2, 2] (the generic ``asymmetric_dynamics`` form).
+
+    Each step: ``z += d a``, ``d = x_k - z``, ``a = 1 - exp(-dt / tau_up_s)`` if ``d > 0`` else
+    ``dt / (tau_down_s exp(k w) + dt)``. Long signals run through :func:`_shoot_lag` (the
+    same samples to rounding), short ones one sample at a time (:func:`exp_level_lag_loop`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Input (the level the output tends to), unit of ``y_c``.
+    dt_s, tau_up_s, tau_down_s : float
+        Sample period and time constants, s (a time constant 0: follow at once).
+    k : float
+        Log-linear level slope of the falling time constant.
+    y_c, y_s : float
+        Centre and scale (> 0) of the level, unit of ``x``.
+    z0 : float, optional
+        Initial output (default ``x[0]``).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    xs, z, a_up = _lag_start(x, dt_s, tau_up_s, z0)
+    if xs.size >= _MIN_SHOOT:
+        return _shoot_lag(xs, z, a_up, _FallingLaw("exp", dt_s, tau_down_s, k, y_c, y_s))
+    return exp_level_lag_loop(xs, dt_s, tau_up_s, tau_down_s, k, y_c, y_s, z)
+
+
 def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, z0: float | None = None,
                    *, level_dependence: float = 0.0, level_ref: float = 1.0) -> np.ndarray:
     """First-order lag with a direction-dependent time constant.
 
     ``z`` follows ``x`` with time constant ``tau_up_s`` when ``x > z`` and
     ``tau_down_s * (1 + level_dependence * max(0, 1 - z / level_ref))`` otherwise;
-    each step is exact for the time constant in force (``1 - exp(-dt / tau)``).
+    each step is exact for the time constant in force (``1 - exp(-dt / tau)``) when
+    ``level_dependence`` is 0, else ``dt / (tau + dt)`` while falling.
+
+    Long signals run through :func:`_shoot_lag` (all segments stepped at once, the same
+    samples to rounding); short ones one sample at a time.
 
     Parameters
     ----------
@@ -168,30 +435,17 @@ def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: floa
     -------
     ndarray, shape (n,)
     """
-    xs = np.asarray(x, float)
-    a_up = 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
-    z = float(xs[0]) if z0 is None else float(z0)
-    # a per-sample recursion (the direction depends on the state): lean loops, appending to a list
-    out: list[float] = []
-    append = out.append
+    xs, z, a_up = _lag_start(x, dt_s, tau_up_s, z0)
     if level_dependence == 0.0:
         a_dn = 1.0 if tau_down_s <= 0 else -math.expm1(-dt_s / tau_down_s)
-        for xi in xs.tolist():
-            d = xi - z
-            z += d * (a_up if d > 0.0 else a_dn)
-            append(z)
+        law = _FallingLaw("const", a_dn=a_dn)
     else:
-        inv_ref = 1.0 / level_ref
-        for xi in xs.tolist():
-            d = xi - z
-            if d > 0.0:
-                z += d * a_up
-            else:
-                g = 1.0 - z * inv_ref
-                tau = tau_down_s * (1.0 + level_dependence * (g if g > 0.0 else 0.0))
-                z += d * (dt_s / (tau + dt_s) if tau > 0 else 1.0)
-            append(z)
-    return np.array(out, dtype=float)
+        law = _FallingLaw("linear", dt_s, tau_down_s, level_dependence, 0.0, level_ref)
+    if xs.size >= _MIN_SHOOT:
+        return _shoot_lag(xs, z, a_up, law)
+    if level_dependence == 0.0:
+        return _lag_loop(xs, z, a_up, a_dn)
+    return _lag_loop_linear_level(xs, z, a_up, dt_s, tau_down_s, level_dependence, level_ref)
 
 
 def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:
