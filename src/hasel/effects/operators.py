@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -287,29 +288,42 @@ def _shoot_lag(xs: np.ndarray, z0: float, a_up: float, law: _FallingLaw, max_swe
 
 
 def _repair(XT: np.ndarray, ZT: np.ndarray, a_up: float, law: _FallingLaw, tol: float) -> None:
-    """Make the segments (columns of ``ZT``) continue each other: in order, a segment whose first
-    step did not start from the end of the one before is stepped again one sample at a time from
-    that end, until its samples meet the stored ones (equal, or within ``tol``; from there on the
-    same steps follow). With ``tol = 0`` the result is the plain recursion's, bit for bit, as far
-    as the vector steps are (the constant and linear laws: the same operations in the same order)."""
+    """Make the segments (columns of ``ZT``) continue each other.
+
+    The first step of every segment is taken again from the stored end of the one before
+    (all at once); where it does not give the stored first sample (equal, or within ``tol``),
+    the segment is stepped again one sample at a time, in order, from the end before it until
+    its samples meet the stored ones (from there on the same steps follow); a segment whose
+    end moved sends the next one through the same. With ``tol = 0`` the result is the plain
+    recursion's, bit for bit, as far as the vector steps are (the constant and linear laws:
+    the same operations in the same order).
+    """
     L, M = ZT.shape
-    z_end = float(ZT[L - 1, 0])
+    if M < 2:
+        return
+    zp = ZT[L - 1, :-1].copy()
+    d = XT[0, 1:] - zp
+    a = law.a(zp.copy())
+    a[d > 0.0] = a_up
+    first = zp + d * a
+    diff = np.abs(first - ZT[0, 1:])
+    queue = deque((np.flatnonzero(~(diff <= tol)) + 1).tolist())
     step = law.scalar
-    for m in range(1, M):
+    while queue:
+        m = queue.popleft()
         col = ZT[:, m]
-        x = XT[:, m]
-        # the first step from the previous end, against the stored first sample
-        z = z_end
-        j = 0
-        while j < L:
-            d = float(x[j]) - z
-            z += d * (a_up if d > 0.0 else step(z))
+        x = XT[:, m].tolist()
+        z = float(ZT[L - 1, m - 1])
+        for j in range(L):
+            d0 = x[j] - z
+            z += d0 * (a_up if d0 > 0.0 else step(z))
             old = float(col[j])
             if z == old or abs(z - old) <= tol:
                 break
             col[j] = z
-            j += 1
-        z_end = float(col[L - 1])
+        else:  # the end moved: the next segment starts elsewhere
+            if m + 1 < M and (not queue or queue[0] != m + 1):
+                queue.appendleft(m + 1)
 
 
 def _lag_loop(xs: np.ndarray, z: float, a_up: float, a_dn: float) -> np.ndarray:
