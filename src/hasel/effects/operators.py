@@ -40,13 +40,34 @@ def monotone_runs(x: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate([[0], change])).astype(int)
 
 
+def _play_scan(xs: np.ndarray, rr: np.ndarray, start: float) -> np.ndarray:
+    """The play operators of half-widths ``rr`` (shape (m, 1)) on ``xs`` from ``start``, as a prefix
+    scan of clamps (shape (m, n))."""
+    lo = xs[None, :] - rr
+    hi = xs[None, :] + rr
+    n = xs.size
+    d = 1
+    while d < n:
+        l_prev, h_prev = lo[:, :-d], hi[:, :-d]
+        l_cur, h_cur = lo[:, d:], hi[:, d:]
+        new_lo = np.minimum(np.maximum(l_prev, l_cur), h_cur)
+        new_hi = np.minimum(np.maximum(h_prev, l_cur), h_cur)
+        lo[:, d:], hi[:, d:] = new_lo, new_hi
+        d *= 2
+    return np.minimum(np.maximum(start, lo), hi)
+
+
 def play(x: np.ndarray, r: float | np.ndarray, y0: float | None = None) -> np.ndarray:
     """Play operator of half-width ``r``: ``y_k = min(max(y_{k-1}, x_k - r), x_k + r)``.
 
     Each step is a clamp to ``[x_k - r, x_k + r]``, and a composition of clamps is a
     clamp (``clamp(clamp(y, l1, h1), l2, h2) = clamp(y, clamp(l1, l2, h2),
     clamp(h1, l2, h2))``), so the whole recursion is a prefix scan of clamps: about
-    ``log2(n)`` vector passes instead of a loop over samples.
+    ``log2(n)`` vector passes instead of a loop over samples. Over a monotone run of ``x``
+    the clamps in between compose to the one at the run's end (rising: ``y_k = max(y_a,
+    x_k - r)`` from the run's start ``a``), so the scan runs over the turning points only
+    and the runs are filled in from them: every output is the same float as the full
+    scan's (each is one of ``y0``, ``x_i - r``, ``x_i + r``, chosen by comparisons).
 
     Parameters
     ----------
@@ -63,19 +84,24 @@ def play(x: np.ndarray, r: float | np.ndarray, y0: float | None = None) -> np.nd
     """
     xs = np.asarray(x, float)
     rr = np.atleast_1d(np.asarray(r, float))[:, None]
-    lo = xs[None, :] - rr
-    hi = xs[None, :] + rr
-    n = xs.size
-    d = 1
-    while d < n:
-        l_prev, h_prev = lo[:, :-d], hi[:, :-d]
-        l_cur, h_cur = lo[:, d:], hi[:, d:]
-        new_lo = np.minimum(np.maximum(l_prev, l_cur), h_cur)
-        new_hi = np.minimum(np.maximum(h_prev, l_cur), h_cur)
-        lo[:, d:], hi[:, d:] = new_lo, new_hi
-        d *= 2
     start = float(xs[0]) if y0 is None else float(y0)
-    out = np.minimum(np.maximum(start, lo), hi)
+    n = xs.size
+    knots = monotone_runs(xs) if n > 2 else np.arange(n)
+    if knots[-1] != n - 1:
+        knots = np.append(knots, n - 1)
+    if knots.size > n // 3:  # many reversals (a noisy input): the plain scan
+        out = _play_scan(xs, rr, start)
+    else:
+        at = _play_scan(xs[knots], rr, start)  # the outputs at the turning points
+        # each sample's run (from its starting knot) and direction: +1 rising, -1 falling; a falling
+        # run's min(y_a, x + r) is computed as -max(-y_a, -x - r) (negation is exact)
+        run = np.repeat(np.arange(knots.size - 1), np.diff(knots))
+        sign_run = np.where(xs[knots[1:]] >= xs[knots[:-1]], 1.0, -1.0)
+        sgn = np.append(sign_run[run], 1.0)
+        out = (sgn * xs)[None, :] - rr
+        np.maximum(out[:, :-1], (at[:, :-1] * sign_run)[:, run], out=out[:, :-1])
+        out *= sgn
+        out[:, knots] = at
     return out[0] if np.ndim(r) == 0 else out
 
 
