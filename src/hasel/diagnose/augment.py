@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
+from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
 from hasel.effects.asymmetric import DIRECTIONS, speed_limit  # noqa: F401 - kept importable here
 from hasel.effects.asymmetric import lag as _asym_lag
@@ -388,8 +389,10 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
 
     base_cost = _sse(pipe, build(x0))
     try:
+        # the finite-difference columns are independent: they run in the diagnosis's processes
+        # (the same evaluations as in series; :mod:`hasel.diagnose.pool`)
         res = optimize.least_squares(lambda x: pipe.residuals(build(x), "train"), x0, bounds=(lo, hi),
-                                     method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3)
+                                     method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3, workers=pmap)
     except (ValueError, np.linalg.LinAlgError):
         return {**effects, **fixed}
     return build(res.x) if 2.0 * res.cost < base_cost else {**effects, **fixed}

@@ -36,8 +36,8 @@ def monotone_runs(x: np.ndarray) -> np.ndarray:
     if nz.size == 0:
         return np.array([0], int)
     s = d[nz]
-    change = nz[1:][s[1:] != s[:-1]]
-    return np.unique(np.concatenate([[0], change])).astype(int)
+    change = nz[1:][s[1:] != s[:-1]]  # increasing, all >= 1
+    return np.concatenate([[0], change]).astype(int)
 
 
 def _play_scan(xs: np.ndarray, rr: np.ndarray, start: float) -> np.ndarray:
@@ -170,7 +170,7 @@ class BoucWen:
 
 
 class _FallingLaw:
-    """A falling step law for :func:`_shoot_lag`: ``a(z)`` (the step's share of ``x - z``) and ``da/dz``.
+    """A falling step law for :func:`_shoot_lag`: ``a(z)``, the step's share of ``x - z``.
 
     ``kind`` ``"const"``: ``a = a_dn``; ``"linear"`` (the truth form): ``dt / (tau + dt)``,
     ``tau = tau_down (1 + L max(0, 1 - z / ref))`` (1 where ``tau <= 0``); ``"exp"`` (the
@@ -215,18 +215,6 @@ class _FallingLaw:
             w = -2.0
         return self.dt / (self.tau * math.exp(self.k * w) + self.dt)
 
-    def da(self, z: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """``da/dz`` at states ``z`` with shares ``a`` (for the Newton steps only: need not be exact)."""
-        if self.kind == "const":
-            return np.zeros(z.shape)
-        if self.kind == "linear":
-            g = 1.0 - z * self.inv
-            return np.where((g > 0.0) & (a < 1.0), a * a / self.dt * (self.tau * self.k * self.inv), 0.0)
-        # T = dt (1 - a) / a, dT/dz = T k / s, da/dz = -a^2 / dt dT/dz
-        w = (z - self.c) * self.inv
-        inside = (w < 2.0) & (w > -2.0)
-        return np.where(inside, -(a * (1.0 - a)) * (self.k * self.inv), 0.0)
-
 
 #: Samples per segment of :func:`_shoot_lag`'s sweeps, and the shortest signal it is used on.
 _SEG = 64
@@ -242,8 +230,9 @@ def _shoot_lag(xs: np.ndarray, z0: float, a_up: float, law: _FallingLaw, max_swe
     segments of :data:`_SEG` samples, all stepped at once (one vector operation per sample
     position instead of one Python step per sample) from guessed start states; a start
     that differs from the end of the segment before is corrected by a Newton step through
-    the segments' end sensitivities (``dz_end / dz_start``, exactly 0 after a rise with
-    ``a_up = 1``), and only the segments whose start moved are stepped again. The steps
+    the segments' end sensitivities (``dz_end / dz_start``: the product of ``1 - a``, exactly
+    0 after a rise with ``a_up = 1``; the level law's own slope is left out, so the steps are
+    quasi-Newton), and only the segments whose start moved are stepped again. The steps
     are the recursion's own arithmetic, so once every start matches the previous end (to
     a few units in the last place of the signal's scale) the samples are the recursion's.
     When few segments still move (:data:`_REPAIR`), or after ``max_sweeps`` sweeps, the
@@ -268,23 +257,18 @@ def _shoot_lag(xs: np.ndarray, z0: float, a_up: float, law: _FallingLaw, max_swe
         Xa = XT if idx is None else XT[:, idx]
         Za = np.empty_like(Xa)
         z = s.copy() if idx is None else s[idx]
+        sens = np.ones(z.size)
         for j in range(L):
-            xj = Xa[j]
-            d = xj - z
+            d = Xa[j] - z
             a = law.a(z)
             a[d > 0.0] = a_up
             d *= a
             z = z + d
             Za[j] = z
-        # each segment's sensitivity of its end to its start: the product of the steps' slopes
-        Zp = np.empty_like(Za)
-        Zp[0] = s if idx is None else s[idx]
-        Zp[1:] = Za[:-1]
-        D = Xa - Zp
-        A = law.a(Zp.reshape(-1)).reshape(Zp.shape)
-        slope = 1.0 - A + law.da(Zp.reshape(-1), A.reshape(-1)).reshape(Zp.shape) * D
-        slope[D > 0.0] = 1.0 - a_up
-        sens = np.prod(slope, axis=0)
+            # each segment's sensitivity of its end to its start, without the level law's own slope
+            # (the Newton steps need not be exact: the starts are checked against the ends)
+            np.subtract(1.0, a, out=a)
+            sens *= a
         if idx is None:
             ZT[:] = Za
             S = sens
@@ -335,6 +319,8 @@ def _repair(XT: np.ndarray, ZT: np.ndarray, a_up: float, law: _FallingLaw, tol: 
     diff = np.abs(first - ZT[0, 1:])
     queue = deque((np.flatnonzero(~(diff <= tol)) + 1).tolist())
     step = law.scalar
+    exp_law = law.kind == "exp"
+    dt, tau, k, c, inv, exp = law.dt, law.tau, law.k, law.c, law.inv, math.exp
     while queue:
         m = queue.popleft()
         col = ZT[:, m]
@@ -342,7 +328,17 @@ def _repair(XT: np.ndarray, ZT: np.ndarray, a_up: float, law: _FallingLaw, tol: 
         z = float(ZT[L - 1, m - 1])
         for j in range(L):
             d0 = x[j] - z
-            z += d0 * (a_up if d0 > 0.0 else step(z))
+            if d0 > 0.0:
+                z += d0 * a_up
+            elif exp_law:  # law.scalar written out (the hot case)
+                w = (z - c) * inv
+                if w > 2.0:
+                    w = 2.0
+                elif w < -2.0:
+                    w = -2.0
+                z += d0 * (dt / (tau * exp(k * w) + dt))
+            else:
+                z += d0 * step(z)
             old = float(col[j])
             if z == old or abs(z - old) <= tol:
                 break
