@@ -16,7 +16,13 @@ single-output system (any rate, any units) and returns an :class:`IdentResult`:
 5. a stable continuous transfer function fitted to the pooled H1, its order chosen on
    held-out frequencies (:mod:`hasel.ident.tffit`);
 6. validation: ``y_hat = h_s(v_s) + G(s) (u - v_s)`` simulated over each operating
-   point and scored (MATLAB ``compare`` fit) on its held-out tail only.
+   point and scored (MATLAB ``compare`` fit) on its held-out tail only;
+7. the model's own checks (:mod:`hasel.ident.checks`), among them how well the data
+   pin the response: the output-error fit's cluster-robust covariance (with the
+   timing offset between the channels, estimated by default) and the model orders
+   the held-out data cannot tell from the chosen one. A model the data cannot single
+   out within ``tol_db`` / ``tol_deg`` is not usable (exit 1), with the experiment
+   that would fix it.
 
 The model follows the paper's structure (12): ``z = h_s(v_s) + h_d(v_d)``, with
 ``h_d`` the fitted ``G(s)``.
@@ -100,7 +106,9 @@ class IdentOptions:
     rel_floor : float
         Smallest relative uncertainty in the fit's weights.
     coherence_min, alpha, tol_db, tol_deg : float
-        Settings of the operating-point dependence test.
+        Settings of the operating-point dependence test; ``tol_db`` / ``tol_deg``
+        (dB, deg) are also the accuracy the model's response must be pinned to
+        (checks 6 and 7 of :mod:`hasel.ident.checks`).
     exclude_clipped : bool
         Leave out operating points whose output sits at its largest or smallest
         value in 1 % or more of the samples (a saturated sensor, e.g. the laser's
@@ -386,7 +394,9 @@ class IdentResult:
             "fit": {
                 "method": "frequency-domain start (Sanathanan-Koerner, weighted log-error least squares, static "
                           "gain anchored to the static map), then output-error refinement on the whole log's "
-                          "interleaved estimation blocks; order chosen on the held-out blocks",
+                          "interleaved estimation blocks (with a slow output baseline for sensor wander and, "
+                          "when the data ask for it, a timing offset between the channels); order chosen on the "
+                          "held-out blocks",
                 "cost": fin(self.fit.cost), "rms_db": fin(self.fit.rms_db), "max_db": fin(self.fit.max_db),
                 "rms_deg": fin(self.fit.rms_deg), "max_deg": fin(self.fit.max_deg),
                 "fit_percent": fin(self.fit.fit_percent),
@@ -1097,7 +1107,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         validation = Validation(compare_fit_pct=100.0 * (1.0 - oe.nrmse_heldout), nrmse=oe.nrmse_heldout,
                                 per_segment_pct=per_pct, holdout_fraction=hold)
     # the calibrated dependence test: residuals of the one model, operating point by operating point
-    if not local and len(segs) >= 2 and segs[0].source != "whole log":
+    if len(segs) >= 2 and segs[0].source != "whole log":
         rd = residual_dependence(yd_all, oe.y_hat, [(s.i0 // M, s.i1 // M) for s in segs], fs)
         if rd is not None:
             dep = _with_residual_test(dep, rd)

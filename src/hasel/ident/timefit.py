@@ -336,8 +336,7 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
             ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
             e = est[i0:i1]
             if basis is not None:
-                B, proj = basis
-                base = B @ (proj @ (y[i0:i1][e] - ys[e]))
+                base = basis(y[i0:i1][e] - ys[e])
                 out[i0:i1] = ys + base
                 levels.append(float(np.mean(base)))
                 continue
@@ -371,27 +370,49 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
                     shift_of(theta))
 
 
-def _baseline_basis(n: int, est: np.ndarray, rate_hz: float,
-                    drift_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """Hat functions with knots ``drift_s`` apart over ``n`` samples and their least-squares projector on ``est``.
+class _Baseline:
+    """A piecewise-linear baseline over one piece, knots ``drift_s`` apart, fitted on its estimation samples.
 
-    Returns ``(B, P)``: ``B`` (n x K) the basis, ``P`` (K x n_est) such that ``B @ (P @ r[est])`` is the
-    least-squares piecewise-linear baseline of ``r`` fitted on the estimation samples; None when the
-    piece is shorter than two knot spacings or the fit would be ill-posed (a knot interval without
-    estimation samples).
+    The hat functions are sparse (two per sample): their Gram matrix and right-hand side are
+    sums over the samples, so one fit costs O(n), not O(n K).
+    """
+
+    def __init__(self, n: int, est: np.ndarray, rate_hz: float, drift_s: float):
+        k = int(np.floor(n / (drift_s * rate_hz)))
+        x = np.arange(n, dtype=float) * (k / max(n - 1.0, 1.0))
+        self.j = np.minimum(np.floor(x).astype(int), k - 1)
+        self.w = x - self.j
+        self.k = k
+        self.est = est
+        je, we = self.j[est], self.w[est]
+        gram = np.zeros((k + 1, k + 1))
+        np.add.at(gram, (je, je), (1 - we) ** 2)
+        np.add.at(gram, (je + 1, je + 1), we ** 2)
+        np.add.at(gram, (je, je + 1), (1 - we) * we)
+        np.add.at(gram, (je + 1, je), (1 - we) * we)
+        ev = np.linalg.eigvalsh(gram)
+        self.ok = bool(ev[0] > 1e-9 * ev[-1])
+        self.inv = np.linalg.inv(gram) if self.ok else None
+        self.je, self.we = je, we
+
+    def __call__(self, r_est: np.ndarray) -> np.ndarray:
+        """The least-squares baseline of the residual ``r_est`` (on the estimation samples) over the whole piece."""
+        rhs = (np.bincount(self.je, (1 - self.we) * r_est, self.k + 1)
+               + np.bincount(self.je + 1, self.we * r_est, self.k + 1))
+        c = self.inv @ rhs
+        return c[self.j] * (1 - self.w) + c[self.j + 1] * self.w
+
+
+def _baseline_basis(n: int, est: np.ndarray, rate_hz: float, drift_s: float) -> _Baseline | None:
+    """The slow baseline of a piece of ``n`` samples (see :class:`_Baseline`), or None.
+
+    None when ``drift_s`` is 0, the piece is shorter than two knot spacings, or the fit
+    would be ill-posed (a knot interval without estimation samples).
     """
     if drift_s <= 0 or n < 2 * drift_s * rate_hz or np.count_nonzero(est) < 16:
         return None
-    k = int(np.floor(n / (drift_s * rate_hz)))
-    knots = np.linspace(0.0, n - 1.0, k + 1)
-    x = np.arange(n, dtype=float)
-    B = np.zeros((n, k + 1))
-    for j in range(k + 1):
-        B[:, j] = np.interp(x, knots, np.eye(k + 1)[j])
-    Be = B[est]
-    if np.linalg.matrix_rank(Be) < k + 1:
-        return None
-    return B, np.linalg.pinv(Be)
+    b = _Baseline(n, est, rate_hz, drift_s)
+    return b if b.ok else None
 
 
 def _levenberg_marquardt(resid, theta0: np.ndarray, r0: np.ndarray, max_iter: int) -> np.ndarray:
@@ -554,7 +575,7 @@ def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: fl
             ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
             e = est[i0:i1]
             if basis is not None:
-                out[i0:i1] = ys + basis[0] @ (basis[1] @ (y[i0:i1][e] - ys[e]))
+                out[i0:i1] = ys + basis(y[i0:i1][e] - ys[e])
             elif np.any(e):
                 out[i0:i1] = ys + float(np.mean(y[i0:i1][e] - ys[e]))
             else:
