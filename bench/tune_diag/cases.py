@@ -153,7 +153,9 @@ def run(cases: list[dict], say=print) -> list[dict]:
             r = {"names": v.names, "nominal": v.heldout["nrmse_nominal"], "augmented": v.heldout["nrmse_augmented"],
                  "floor": v.noise_floor_nrmse, "dropped": [x["name"] for x in v.dropped],
                  "ambiguous": [(a["chosen"], a["alternative"]) for a in v.ambiguous],
-                 "params": {e["name"]: e["params"] for e in v.effects}}
+                 "params": {e["name"]: e["params"] for e in v.effects},
+                 "rounds": [{k: x.get(k) for k in ("best", "gain", "nominal_gap_share", "t_block", "z_coloured",
+                                                   "over_floor", "accepted")} for x in v.rounds]}
         except Exception as err:  # noqa: BLE001 - a crash is a result
             r = {"names": [], "error": f"{type(err).__name__}: {err}"}
         r.update(kind=c["kind"], labels=c["labels"], seconds=time.perf_counter() - t0)
@@ -181,6 +183,22 @@ def summary(rows: list[dict]) -> dict:
             "seconds_mean": float(np.mean([r["seconds"] for r in rows]))}
 
 
+def finish(cases: list[dict], rows: list[dict], out: str) -> dict:
+    """Print and write (``out/results.json``) the summary of ``rows``, with pairs and triples apart."""
+    for r, c in zip(rows, cases):
+        r["truth"] = c.get("truth", [])
+    s = summary(rows)
+    for k in (2, 3):  # pairs and triples apart, as the issue reports them
+        sub = [r for r in rows if len(r["labels"]) == k]
+        tp = sum(len(set(r["labels"]) & set(r["names"])) for r in sub)
+        s[f"recall_{k}"] = tp / max(sum(len(r["labels"]) for r in sub), 1)
+        s[f"precision_{k}"] = tp / max(sum(len(r["names"]) for r in sub), 1)
+    print(json.dumps(s))
+    with open(os.path.join(out, "results.json"), "w") as fh:
+        json.dump({"summary": s, "rows": rows}, fh, indent=1, default=str)
+    return s
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/cases.py --out DIR [--only SUBSTR,...]``."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -195,11 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.only:
         keys = a.only.split(",")
         cases = [c for c in cases if any(k in c["kind"] for k in keys)]
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    s = summary(rows)
-    print(json.dumps(s))
-    with open(os.path.join(a.out, "results.json"), "w") as fh:
-        json.dump({"summary": s, "rows": rows}, fh, indent=1, default=str)
+    finish(cases, run(cases, lambda m: (print(m), sys.stdout.flush())), a.out)
     return 0
 
 

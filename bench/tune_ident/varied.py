@@ -5,7 +5,8 @@ sampling convention (zoh/foh/centred), timing offset (-0.5..0.5 samples, a third
 noise (white/coloured/wander, 0.003-0.03 mm), laser quantisation (half of them),
 excitation amplitude (0.5-1), settling time (0-3 s) and pre-conditioning.
 
-Usage: python bench/tune_ident/varied.py [--rates 200,1000,10000] [--designs a,b] [--draws 1] [--seed 0]
+Usage: python bench/tune_ident/varied.py [--rates 200,1000,10000] [--designs a,b] [--draws 1] [--seed 0] [--more]
+       [--opt NAME=VALUE ...]
 Prints one row per log and a tally: good (within 1 dB / 5 deg over 0.1-15 Hz), and the two
 failure kinds: wrong yet usable (the worst: a wrong model at exit 0) and right yet refused.
 """
@@ -40,13 +41,29 @@ def draw(rng: np.random.Generator) -> dict:
             "precondition": bool(rng.random() < 0.5)}
 
 
+def draw_more(rng: np.random.Generator) -> dict:
+    """The extra conditions of ``--more``: hold times of random steps, closed-loop gain, long settling."""
+    lo = float(np.exp(rng.uniform(np.log(0.01), np.log(0.5))))
+    return {"hold_s": (lo, lo * float(np.exp(rng.uniform(np.log(4.0), np.log(20.0))))),
+            "loop_gain": float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))),
+            "settle_s": float(rng.uniform(0.0, 30.0)) if rng.random() < 0.5 else float(rng.uniform(0.0, 3.0))}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rates", default="200,1000,10000")
     ap.add_argument("--designs", default=",".join(designs.DESIGNS))
     ap.add_argument("--draws", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--more", action="store_true",
+                    help="also draw the step-hold range of random_steps (0.01-0.2 .. 0.5-4 s), the closed loop's "
+                         "gain factor (0.5-2) and settling times up to 30 s (a separate stream: the other draws "
+                         "stay as without it)")
+    ap.add_argument("--opt", action="append", default=[], metavar="NAME=VALUE",
+                    help="an identify option (Python literal), e.g. --opt max_timing_samples=1")
     a = ap.parse_args()
+    import ast
+    opts = {kv.split("=", 1)[0]: ast.literal_eval(kv.split("=", 1)[1]) for kv in a.opt}
     tally = {"good": 0, "wrong_usable": 0, "right_refused": 0, "wrong_refused": 0, "error": 0, "n": 0}
     dep_n = dep_rej = 0
     secs = []
@@ -57,14 +74,18 @@ def main() -> int:
             for k in range(a.draws):
                 rng = np.random.default_rng([a.seed, int(rate), di, k])
                 c = draw(rng)
+                if a.more:
+                    c.update(draw_more(np.random.default_rng([a.seed, int(rate), di, k, 7])))
                 log = designs.make_log(d, rate, seed=int(rng.integers(1 << 30)), **c)
                 cond = (f"{c['convention']} off={c['offset_samples']:+.2f} {c['noise_kind']} {c['noise_mm']:.3f}mm "
                         f"lsb={'y' if c['lsb_mm'] else 'n'} amp={c['amplitude']:.2f} settle={c['settle_s']:.1f} "
-                        f"pre={'y' if c['precondition'] else 'n'}")
+                        f"pre={'y' if c['precondition'] else 'n'}" + (f" hold={c['hold_s'][0]:.2f}-{c['hold_s'][1]:.2f} "
+                                                             f"gain={c['loop_gain']:.2f}" if a.more else ""))
                 tally["n"] += 1
                 t0 = time.perf_counter()
                 try:
-                    r = identify(log.t_s, log.u_kv, log.y_mm, input_name="voltage_kv", output_name="stroke_mm")
+                    r = identify(log.t_s, log.u_kv, log.y_mm, input_name="voltage_kv", output_name="stroke_mm",
+                                 **opts)
                 except BadInputError as err:
                     tally["error"] += 1
                     print(f"{d:14s} {rate:6.0f} {k:2d} REFUSED(exit 2): {err} | {cond}", flush=True)

@@ -16,10 +16,12 @@ Designs (:data:`DESIGNS`), each on offsets 2..7 kV unless said otherwise:
 - ``multisine``: odd random-phase multisine 0.1-20 Hz, 10 s period, 3 periods per offset;
 - ``prbs``: random binary levels +-0.7 kV about each offset, held for a random
   multiple of 20 ms, 20 s per offset;
-- ``random_steps``: random levels uniform in +-1 kV about each offset held 0.05-1 s;
+- ``random_steps``: random levels uniform in +-1 kV about each offset held 0.05-1 s
+  (``hold_s`` of :func:`make_log` sets other bounds);
 - ``voltage_steps``: a staircase 0, 2, 4, 6, 4, 2, 0 ... kV, 1.5 s per level, twice;
 - ``closed_loop``: the paper's dual-mode PID at 200 Hz on the noisy stroke, reference
-  2 -> 4 -> 6 -> 4 -> 2 mm, 2 s each, three times; the log holds the applied voltage.
+  2 -> 4 -> 6 -> 4 -> 2 mm, 2 s each, three times; the log holds the applied voltage
+  (``loop_gain`` of :func:`make_log` scales the three PID gains).
 
 ``precondition=True`` puts 1 s at -1 kV (then 0.2 s at 0 kV) before each offset.
 
@@ -80,7 +82,8 @@ def _simulate(u: np.ndarray, rate_hz: float) -> np.ndarray:
     return np.asarray(y).ravel()
 
 
-def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
+def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator,
+                      hold_s: tuple[float, float] = (0.05, 1.0)) -> np.ndarray:
     if kind in ("paper_chirp", "paper_chirp3"):
         t = np.arange(int(round(20.0 * rate_hz))) / rate_hz
         one = np.sin(2 * np.pi * (20.0 / 20.0) * t * t)
@@ -108,7 +111,7 @@ def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator) -> np
         out = np.empty(n)
         i = 0
         while i < n:
-            hold = int(rng.uniform(0.05, 1.0) * rate_hz) + 1
+            hold = int(rng.uniform(hold_s[0], hold_s[1]) * rate_hz) + 1
             out[i:i + hold] = rng.uniform(-1.0, 1.0)
             i += hold
         return out
@@ -149,14 +152,17 @@ def _noise(rng: np.random.Generator, n: int, rate_hz: float, sd: float, kind: st
 def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, precondition: bool = False,
              settle_s: float = 0.5, noise_mm: float = 0.01, offsets_kv=OFFSETS_KV, convention: str = "zoh",
              offset_samples: float = 0.0, noise_kind: str = "white", noise_fc_hz: float = 5.0,
-             lsb_mm: float = 0.0, amplitude: float = 1.0) -> Log:
+             lsb_mm: float = 0.0, amplitude: float = 1.0, hold_s: tuple[float, float] = (0.05, 1.0),
+             loop_gain: float = 1.0) -> Log:
     """One effect-free log of ``design`` (see the module) at ``rate_hz``, noise ``noise_mm`` (mm RMS).
 
-    The measurement knobs (``convention`` ... ``amplitude``) are described in the module.
+    The measurement knobs (``convention`` ... ``amplitude``) are described in the module;
+    ``hold_s`` bounds the hold times of ``random_steps`` (s), ``loop_gain`` scales the
+    PID gains of ``closed_loop``.
     """
     rng = np.random.default_rng(seed)
     if design == "closed_loop":
-        return _closed_loop(rate_hz, rng, noise_mm)
+        return _closed_loop(rate_hz, rng, noise_mm, loop_gain)
     parts: list[np.ndarray] = [np.zeros(int(round(0.5 * rate_hz)))]
     marks = []
     if design == "voltage_steps":
@@ -170,7 +176,7 @@ def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, preconditio
                 parts.append(np.zeros(int(round(0.2 * rate_hz))))
             parts.append(np.full(int(round(settle_s * rate_hz)), off))
             n0 = sum(p.size for p in parts)
-            x = off + amplitude * _chirp_per_offset(design, rate_hz, rng)
+            x = off + amplitude * _chirp_per_offset(design, rate_hz, rng, hold_s)
             parts.append(x)
             marks.append((n0 / rate_hz, (n0 + x.size) / rate_hz, off))
         parts.append(np.zeros(int(round(0.5 * rate_hz))))
@@ -190,8 +196,8 @@ def make_log(design: str, rate_hz: float = 1000.0, *, seed: int = 0, preconditio
                                           "noise_kind": noise_kind, "lsb_mm": lsb_mm, "amplitude": amplitude})
 
 
-def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float) -> Log:
-    """The dual-mode PID at 200 Hz (its own implementation) around P(s) simulated at ``rate_hz``."""
+def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float, loop_gain: float = 1.0) -> Log:
+    """The dual-mode PID at 200 Hz (its own implementation, gains times ``loop_gain``) around P(s) at ``rate_hz``."""
     Ad, Bd, Cd, Dd = plant_discrete(rate_hz)
     dt_c = paper.LOOP_PERIOD_S
     every = max(1, int(round(dt_c * rate_hz)))
@@ -210,7 +216,7 @@ def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float) -> L
         y[i] = y_true + noise_mm * rng.standard_normal()
         if i % every == 0 and i >= hold:
             e = r[i] - y[i]
-            kp, ki, kd = paper.C_PLUS if e >= 0 else paper.C_MINUS
+            kp, ki, kd = (loop_gain * g for g in (paper.C_PLUS if e >= 0 else paper.C_MINUS))
             integ_new = integ + 0.5 * (e + e_prev) * dt_c
             out = kp * e + ki * integ_new + kd * (e - e_prev) / dt_c
             if 0.0 <= out <= paper.V_MAX_KV:
@@ -221,4 +227,4 @@ def _closed_loop(rate_hz: float, rng: np.random.Generator, noise_mm: float) -> L
         x = Ad @ x + Bd[:, 0] * v
     # the stroke sample i is taken before the voltage of sample i acts (as a sampled loop does)
     t = np.arange(n) / rate_hz
-    return Log(t, u, y, "closed_loop", rate_hz, {"noise_mm": noise_mm, "reference_mm": refs})
+    return Log(t, u, y, "closed_loop", rate_hz, {"noise_mm": noise_mm, "reference_mm": refs, "loop_gain": loop_gain})

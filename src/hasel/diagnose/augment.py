@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, signal
 
+from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
 from hasel.effects.asymmetric import DIRECTIONS, speed_limit  # noqa: F401 - kept importable here
 from hasel.effects.asymmetric import lag as _asym_lag
@@ -247,18 +248,20 @@ class Pipeline:
         sim = self.loaded(mu, kappa, lin)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         if f is not None and len(f.theta) > 2:  # the load's weight: a static offset (a sag)
+            key += ("sag",) + f.theta[2:]
             y = y + f.theta[2]
         out["y_lin"] = y
         f = e.get("static_nonlinearity")
         if f is not None and f.variant == "internal":
+            key += ("mn",) + f.theta
             w = (y - self.y_c) / self.y_s
             y = y + self.unit(sim).run(self.y_s * poly_map(f.theta, w))
         out["y_int"] = y
         f = e.get("asymmetric_dynamics")
-        if f is not None and f.variant.startswith("rate_limit"):
-            y = speed_limit(y, f.theta[0], self.prep.dt_s, f.variant.split(":")[1])
-        elif f is not None:
-            y = _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
+        if f is not None:
+            # a state-dependent recursion: kept for the fits that hold it fixed (of the stages after it)
+            key += ("a", f.variant) + f.theta
+            y = self._memo(("ya", ri) + key, lambda y=y, f=f: self._asym(y, f))
         out["y_asym"] = y
         f = e.get("charge_drift")
         if f is not None:
@@ -279,6 +282,12 @@ class Pipeline:
         out["y"] = y
         self.n_evals += 1
         return out
+
+    def _asym(self, y: np.ndarray, f: EffectFit) -> np.ndarray:
+        """The asymmetric-dynamics stage ``f`` applied to the output ``y`` (speed limit or lag)."""
+        if f.variant.startswith("rate_limit"):
+            return speed_limit(y, f.theta[0], self.prep.dt_s, f.variant.split(":")[1])
+        return _asym_lag(y, self.prep.dt_s, f.theta, self.y_c, self.y_s)
 
     def unit(self, sim: LinearSim) -> "LinearSim | _Scaled":
         """``sim`` scaled to unit DC gain (or unscaled if its DC gain is ~0)."""
@@ -380,8 +389,10 @@ def joint_refine(pipe: Pipeline, effects: dict[str, EffectFit], max_nfev: int = 
 
     base_cost = _sse(pipe, build(x0))
     try:
+        # the finite-difference columns are independent: they run in the diagnosis's processes
+        # (the same evaluations as in series; :mod:`hasel.diagnose.pool`)
         res = optimize.least_squares(lambda x: pipe.residuals(build(x), "train"), x0, bounds=(lo, hi),
-                                     method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3)
+                                     method="trf", max_nfev=max_nfev, x_scale="jac", diff_step=1e-3, workers=pmap)
     except (ValueError, np.linalg.LinAlgError):
         return {**effects, **fixed}
     return build(res.x) if 2.0 * res.cost < base_cost else {**effects, **fixed}

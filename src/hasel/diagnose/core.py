@@ -90,7 +90,10 @@ class DiagnoseOptions:
     (:func:`hasel_bench.othersim.make_free_case`: paper protocol, chirp, multisine, PRBS and
     closed-loop logs; white, coloured noise and slow sensor wander; 200 Hz-5 kHz; ZOH, FOH
     and centred sampling; fractional timing offsets); **[design]** a structural choice, not
-    tuned. No threshold was set on ``bench/verify``.
+    tuned; **[combos]** checked on the pairs and triples of ``bench/tune_diag/combos.py`` (seed 21:
+    othersim's chain on paper, multisine, PRBS, chirp and closed-loop step commands, 200 Hz-5 kHz,
+    white, coloured and wandering noise, effects scaled 0.4-1.0) and ``bench/tune_diag/other_pairs.py``
+    (seed 5: othersim's own pairs and triples). No threshold was set on ``bench/verify``.
 
     Attributes
     ----------
@@ -168,6 +171,13 @@ class DiagnoseOptions:
         member of a pair was lost although the residual was 23x the floor's energy
         (``bench/tune_diag``, load + drift). Now 0: an effect that removes most of what is left
         and passes the held-out test is named whatever its share of the nominal gap.
+    relevant_over_floor : float
+        ...or, after the first effect, whatever its share of the nominal gap when the validation
+        residual it acts on is at least this many times the floor's energy (it must still remove
+        ``min_next_gain`` of it, pass the held-out test and the BIC) [combos]: a load
+        beside a soft stroke limit removed 45 % of a residual 800 times the floor's energy
+        (coloured z 11) but only 0.3 % of the nominal gap, and was lost (``bench/tune_diag/combos.py``
+        seed 21, combo_05). Effect-free logs are untouched (their first round has no such branch).
     stop_share, stop_over_floor : float
         No further round once what is left above the floor is below ``stop_share`` of the
         nominal gap *and* the validation error is within ``stop_over_floor`` times the
@@ -238,6 +248,7 @@ class DiagnoseOptions:
     min_nominal_share: float = 0.03
     near_all_gain: float = 0.5
     min_nominal_share_near_all: float = 0.0
+    relevant_over_floor: float = 10.0
     stop_share: float = 0.008
     stop_over_floor: float = 2.0
     clip_share_min: float = 0.1
@@ -1301,14 +1312,19 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     dbic = -(st.mse_tr - m_tr) * ctx.n_tr / sigma2 + k * math.log(ctx.n_tr)
     need = opts.min_first_gain if rnd == 0 else opts.min_next_gain
     # a share of the nominal gap, or (smaller) if it explains nearly all that is left
+    # ... or, after a first effect, if what it acts on stands far above the floor (a smaller member of
+    # a pair or triple beside a large first one)
+    over_floor = mse_ho / sigma2 if sigma2 > 0 else float("inf")
     big_enough = nominal_share >= opts.min_nominal_share or (
-        gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all)
+        gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all) or (
+        rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
     held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
     ok = gain >= need and gap_share >= opts.min_gap_share and big_enough and held_out_ok and dbic < 0
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
-                          "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic, "accepted": bool(ok)})
+                          "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
+                          "over_floor": over_floor, "accepted": bool(ok)})
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g} -> "

@@ -1,7 +1,8 @@
 """Independent fits of the diagnosis run in parallel processes.
 
-The candidate families of a selection round (and the points of a delay's profile) are
-fitted independently of each other on the same data, so :func:`pmap` runs them in
+The candidate families of a selection round (and the points of a delay's profile, and the
+finite-difference columns of the joint refinement's Jacobian: ``least_squares(workers=pmap)``)
+are fitted independently of each other on the same data, so :func:`pmap` runs them in
 forked worker processes: a fork shares the prepared data and the closures of the
 diagnosis without pickling them, and only the small results (fitted parameters, a
 validation residual) come back. Every task is the same computation as in a serial run,

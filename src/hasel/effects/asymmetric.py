@@ -23,7 +23,7 @@ import numpy as np
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import _refine, _sse, _with, fit_log_scalar, rate_grid
-from hasel.effects.operators import asymmetric_lag, rate_limited, rate_step
+from hasel.effects.operators import asymmetric_lag, exp_level_lag, rate_limited, rate_step
 from hasel.validate import in_range, positive
 
 __all__ = ["AsymmetricDynamics", "DIRECTIONS", "speed_limit", "lag", "LagStage", "SpeedStage",
@@ -114,26 +114,7 @@ def lag(y: np.ndarray, dt: float, theta: tuple[float, ...], y_c: float, y_s: flo
     z = float(y[0]) if z0 is None else float(z0)
     if k == 0.0:
         return asymmetric_lag(y, dt, tau_up, tau_dn, z)
-    a_up = 1.0 if tau_up <= 0 else -math.expm1(-dt / tau_up)
-    # a per-sample recursion (the direction depends on the state): the loop is kept lean, appending
-    # to a list and branching on the clip, with the same arithmetic in the same order
-    out: list[float] = []
-    append = out.append
-    inv = 1.0 / y_s
-    exp = math.exp
-    for xi in y.tolist():
-        d = xi - z
-        if d > 0.0:
-            z += d * a_up
-        else:
-            w = (z - y_c) * inv
-            if w > 2.0:
-                w = 2.0
-            elif w < -2.0:
-                w = -2.0
-            z += d * (dt / (tau_dn * exp(k * w) + dt))
-        append(z)
-    return np.array(out, dtype=float)
+    return exp_level_lag(y, dt, tau_up, tau_dn, k, y_c, y_s, z)
 
 
 class LagStage:

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -35,8 +36,25 @@ def monotone_runs(x: np.ndarray) -> np.ndarray:
     if nz.size == 0:
         return np.array([0], int)
     s = d[nz]
-    change = nz[1:][s[1:] != s[:-1]]
-    return np.unique(np.concatenate([[0], change])).astype(int)
+    change = nz[1:][s[1:] != s[:-1]]  # increasing, all >= 1
+    return np.concatenate([[0], change]).astype(int)
+
+
+def _play_scan(xs: np.ndarray, rr: np.ndarray, start: float) -> np.ndarray:
+    """The play operators of half-widths ``rr`` (shape (m, 1)) on ``xs`` from ``start``, as a prefix
+    scan of clamps (shape (m, n))."""
+    lo = xs[None, :] - rr
+    hi = xs[None, :] + rr
+    n = xs.size
+    d = 1
+    while d < n:
+        l_prev, h_prev = lo[:, :-d], hi[:, :-d]
+        l_cur, h_cur = lo[:, d:], hi[:, d:]
+        new_lo = np.minimum(np.maximum(l_prev, l_cur), h_cur)
+        new_hi = np.minimum(np.maximum(h_prev, l_cur), h_cur)
+        lo[:, d:], hi[:, d:] = new_lo, new_hi
+        d *= 2
+    return np.minimum(np.maximum(start, lo), hi)
 
 
 def play(x: np.ndarray, r: float | np.ndarray, y0: float | None = None) -> np.ndarray:
@@ -45,7 +63,11 @@ def play(x: np.ndarray, r: float | np.ndarray, y0: float | None = None) -> np.nd
     Each step is a clamp to ``[x_k - r, x_k + r]``, and a composition of clamps is a
     clamp (``clamp(clamp(y, l1, h1), l2, h2) = clamp(y, clamp(l1, l2, h2),
     clamp(h1, l2, h2))``), so the whole recursion is a prefix scan of clamps: about
-    ``log2(n)`` vector passes instead of a loop over samples.
+    ``log2(n)`` vector passes instead of a loop over samples. Over a monotone run of ``x``
+    the clamps in between compose to the one at the run's end (rising: ``y_k = max(y_a,
+    x_k - r)`` from the run's start ``a``), so the scan runs over the turning points only
+    and the runs are filled in from them: every output is the same float as the full
+    scan's (each is one of ``y0``, ``x_i - r``, ``x_i + r``, chosen by comparisons).
 
     Parameters
     ----------
@@ -62,19 +84,24 @@ def play(x: np.ndarray, r: float | np.ndarray, y0: float | None = None) -> np.nd
     """
     xs = np.asarray(x, float)
     rr = np.atleast_1d(np.asarray(r, float))[:, None]
-    lo = xs[None, :] - rr
-    hi = xs[None, :] + rr
-    n = xs.size
-    d = 1
-    while d < n:
-        l_prev, h_prev = lo[:, :-d], hi[:, :-d]
-        l_cur, h_cur = lo[:, d:], hi[:, d:]
-        new_lo = np.minimum(np.maximum(l_prev, l_cur), h_cur)
-        new_hi = np.minimum(np.maximum(h_prev, l_cur), h_cur)
-        lo[:, d:], hi[:, d:] = new_lo, new_hi
-        d *= 2
     start = float(xs[0]) if y0 is None else float(y0)
-    out = np.minimum(np.maximum(start, lo), hi)
+    n = xs.size
+    knots = monotone_runs(xs) if n > 2 else np.arange(n)
+    if knots[-1] != n - 1:
+        knots = np.append(knots, n - 1)
+    if knots.size > n // 3:  # many reversals (a noisy input): the plain scan
+        out = _play_scan(xs, rr, start)
+    else:
+        at = _play_scan(xs[knots], rr, start)  # the outputs at the turning points
+        # each sample's run (from its starting knot) and direction: +1 rising, -1 falling; a falling
+        # run's min(y_a, x + r) is computed as -max(-y_a, -x - r) (negation is exact)
+        run = np.repeat(np.arange(knots.size - 1), np.diff(knots))
+        sign_run = np.where(xs[knots[1:]] >= xs[knots[:-1]], 1.0, -1.0)
+        sgn = np.append(sign_run[run], 1.0)
+        out = (sgn * xs)[None, :] - rr
+        np.maximum(out[:, :-1], (at[:, :-1] * sign_run)[:, run], out=out[:, :-1])
+        out *= sgn
+        out[:, knots] = at
     return out[0] if np.ndim(r) == 0 else out
 
 
@@ -142,13 +169,289 @@ class BoucWen:
         return out
 
 
+class _FallingLaw:
+    """A falling step law for :func:`_shoot_lag`: ``a(z)``, the step's share of ``x - z``.
+
+    ``kind`` ``"const"``: ``a = a_dn``; ``"linear"`` (the truth form): ``dt / (tau + dt)``,
+    ``tau = tau_down (1 + L max(0, 1 - z / ref))`` (1 where ``tau <= 0``); ``"exp"`` (the
+    generic form): ``dt / (T + dt)``, ``T = tau_down exp(k clip((z - c) / s, -2, 2))``. The
+    vector arithmetic is the scalar loops' own, in the same order.
+    """
+
+    def __init__(self, kind: str, dt_s: float = 1.0, tau_down_s: float = 0.0, slope: float = 0.0,
+                 centre: float = 0.0, scale: float = 1.0, a_dn: float = 1.0) -> None:
+        self.kind, self.dt, self.tau, self.k = kind, float(dt_s), float(tau_down_s), float(slope)
+        self.c, self.inv, self.a_dn = float(centre), 1.0 / float(scale), float(a_dn)
+
+    def a(self, z: np.ndarray) -> np.ndarray:
+        """Falling step shares at states ``z``."""
+        if self.kind == "const":
+            return np.full(z.shape, self.a_dn)
+        if self.kind == "linear":
+            g = 1.0 - z * self.inv
+            tau = self.tau * (1.0 + self.k * np.maximum(g, 0.0))
+            pos = tau > 0
+            return np.where(pos, self.dt / (np.where(pos, tau, 1.0) + self.dt), 1.0)
+        w = (z - self.c) * self.inv
+        np.minimum(w, 2.0, out=w)
+        np.maximum(w, -2.0, out=w)
+        w *= self.k
+        big = self.tau * np.exp(w, out=w)
+        big += self.dt
+        return np.divide(self.dt, big, out=big)
+
+    def scalar(self, z: float) -> float:
+        """The falling step share at one state ``z`` (the scalar loops' expression)."""
+        if self.kind == "const":
+            return self.a_dn
+        if self.kind == "linear":
+            g = 1.0 - z * self.inv
+            tau = self.tau * (1.0 + self.k * (g if g > 0.0 else 0.0))
+            return self.dt / (tau + self.dt) if tau > 0 else 1.0
+        w = (z - self.c) * self.inv
+        if w > 2.0:
+            w = 2.0
+        elif w < -2.0:
+            w = -2.0
+        return self.dt / (self.tau * math.exp(self.k * w) + self.dt)
+
+
+#: Samples per segment of :func:`_shoot_lag`'s sweeps, and the shortest signal it is used on.
+_SEG = 64
+_MIN_SHOOT = 4096
+#: Segments still moving after a sweep below which the rest is repaired one sample at a time.
+_REPAIR = 48
+
+
+def _shoot_lag(xs: np.ndarray, z0: float, a_up: float, law: _FallingLaw, max_sweeps: int = 6) -> np.ndarray:
+    """The direction-dependent lag ``z_k = z_{k-1} + a (x_k - z_{k-1})`` by multiple shooting.
+
+    ``a = a_up`` while ``x_k > z_{k-1}``, else ``law.a(z_{k-1})``. The signal is cut into
+    segments of :data:`_SEG` samples, all stepped at once (one vector operation per sample
+    position instead of one Python step per sample) from guessed start states; a start
+    that differs from the end of the segment before is corrected by a Newton step through
+    the segments' end sensitivities (``dz_end / dz_start``: the product of ``1 - a``, exactly
+    0 after a rise with ``a_up = 1``; the level law's own slope is left out, so the steps are
+    quasi-Newton), and only the segments whose start moved are stepped again. The steps
+    are the recursion's own arithmetic, so once every start matches the previous end (to
+    a few units in the last place of the signal's scale) the samples are the recursion's.
+    When few segments still move (:data:`_REPAIR`), or after ``max_sweeps`` sweeps, the
+    rest is done one sample at a time in order (:func:`_repair`): exact, and in the worst
+    case as slow as the plain recursion.
+    """
+    n = xs.size
+    L = _SEG
+    M = -(-n // L)
+    X = np.empty(M * L)
+    X[:n] = xs
+    X[n:] = xs[-1]
+    XT = np.ascontiguousarray(X.reshape(M, L).T)  # row j: sample j of every segment
+    ZT = np.empty((L, M))
+    s = np.empty(M)
+    s[0] = z0
+    s[1:] = XT[-1, :-1]  # guess: the input at the end of the segment before
+    scale = max(float(np.max(np.abs(xs))), abs(z0), 1e-300)
+    tol = 8.0 * np.finfo(float).eps * scale
+    idx = None  # all segments
+    for _ in range(max_sweeps):
+        Xa = XT if idx is None else XT[:, idx]
+        Za = np.empty_like(Xa)
+        z = s.copy() if idx is None else s[idx]
+        sens = np.ones(z.size)
+        for j in range(L):
+            d = Xa[j] - z
+            a = law.a(z)
+            a[d > 0.0] = a_up
+            d *= a
+            z = z + d
+            Za[j] = z
+            # each segment's sensitivity of its end to its start, without the level law's own slope
+            # (the Newton steps need not be exact: the starts are checked against the ends)
+            np.subtract(1.0, a, out=a)
+            sens *= a
+        if idx is None:
+            ZT[:] = Za
+            S = sens
+        else:
+            ZT[:, idx] = Za
+            S[idx] = sens
+        # starts against the ends before them; a Newton step along the chain of segments
+        ends = ZT[-1].tolist()
+        sl, Sl = s.tolist(), S.tolist()
+        ds = [0.0] * M
+        moved = []
+        prev = 0.0
+        for m in range(1, M):
+            dm = ends[m - 1] + Sl[m - 1] * prev - sl[m]
+            if -tol <= dm <= tol:
+                dm = 0.0
+            else:
+                moved.append(m)
+            ds[m] = dm
+            prev = dm
+        if len(moved) <= _REPAIR:
+            break
+        idx = np.array(moved)
+        s[idx] += np.asarray(ds)[idx]
+    _repair(XT, ZT, a_up, law, 0.0 if law.kind != "exp" else tol)
+    return ZT.T.reshape(-1)[:n].copy()
+
+
+def _repair(XT: np.ndarray, ZT: np.ndarray, a_up: float, law: _FallingLaw, tol: float) -> None:
+    """Make the segments (columns of ``ZT``) continue each other.
+
+    The first step of every segment is taken again from the stored end of the one before
+    (all at once); where it does not give the stored first sample (equal, or within ``tol``),
+    the segment is stepped again one sample at a time, in order, from the end before it until
+    its samples meet the stored ones (from there on the same steps follow); a segment whose
+    end moved sends the next one through the same. With ``tol = 0`` the result is the plain
+    recursion's, bit for bit, as far as the vector steps are (the constant and linear laws:
+    the same operations in the same order).
+    """
+    L, M = ZT.shape
+    if M < 2:
+        return
+    zp = ZT[L - 1, :-1].copy()
+    d = XT[0, 1:] - zp
+    a = law.a(zp.copy())
+    a[d > 0.0] = a_up
+    first = zp + d * a
+    diff = np.abs(first - ZT[0, 1:])
+    queue = deque((np.flatnonzero(~(diff <= tol)) + 1).tolist())
+    step = law.scalar
+    exp_law = law.kind == "exp"
+    dt, tau, k, c, inv, exp = law.dt, law.tau, law.k, law.c, law.inv, math.exp
+    while queue:
+        m = queue.popleft()
+        col = ZT[:, m]
+        x = XT[:, m].tolist()
+        z = float(ZT[L - 1, m - 1])
+        for j in range(L):
+            d0 = x[j] - z
+            if d0 > 0.0:
+                z += d0 * a_up
+            elif exp_law:  # law.scalar written out (the hot case)
+                w = (z - c) * inv
+                if w > 2.0:
+                    w = 2.0
+                elif w < -2.0:
+                    w = -2.0
+                z += d0 * (dt / (tau * exp(k * w) + dt))
+            else:
+                z += d0 * step(z)
+            old = float(col[j])
+            if z == old or abs(z - old) <= tol:
+                break
+            col[j] = z
+        else:  # the end moved: the next segment starts elsewhere
+            if m + 1 < M and (not queue or queue[0] != m + 1):
+                queue.appendleft(m + 1)
+
+
+def _lag_loop(xs: np.ndarray, z: float, a_up: float, a_dn: float) -> np.ndarray:
+    """The constant-time-constant recursion, one sample at a time (the definition)."""
+    out: list[float] = []
+    append = out.append
+    for xi in xs.tolist():
+        d = xi - z
+        z += d * (a_up if d > 0.0 else a_dn)
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def _lag_loop_linear_level(xs: np.ndarray, z: float, a_up: float, dt_s: float, tau_down_s: float,
+                           level_dependence: float, level_ref: float) -> np.ndarray:
+    """The truth form's level-dependent recursion, one sample at a time (the definition)."""
+    out: list[float] = []
+    append = out.append
+    inv_ref = 1.0 / level_ref
+    for xi in xs.tolist():
+        d = xi - z
+        if d > 0.0:
+            z += d * a_up
+        else:
+            g = 1.0 - z * inv_ref
+            tau = tau_down_s * (1.0 + level_dependence * (g if g > 0.0 else 0.0))
+            z += d * (dt_s / (tau + dt_s) if tau > 0 else 1.0)
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def exp_level_lag_loop(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, k: float, y_c: float,
+                       y_s: float, z0: float) -> np.ndarray:
+    """:func:`exp_level_lag` one sample at a time (the definition; the reference of the fast kernel)."""
+    a_up = 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
+    z = float(z0)
+    out: list[float] = []
+    append = out.append
+    inv = 1.0 / y_s
+    exp = math.exp
+    for xi in np.asarray(x, float).tolist():
+        d = xi - z
+        if d > 0.0:
+            z += d * a_up
+        else:
+            w = (z - y_c) * inv
+            if w > 2.0:
+                w = 2.0
+            elif w < -2.0:
+                w = -2.0
+            z += d * (dt_s / (tau_down_s * exp(k * w) + dt_s))
+        append(z)
+    return np.array(out, dtype=float)
+
+
+def _lag_start(x: np.ndarray, dt_s: float, tau_up_s: float, z0: float | None) -> tuple[np.ndarray, float, float]:
+    """The input as floats, the initial output (default ``x[0]``; 0 for an empty input) and the
+    rising step share ``1 - exp(-dt / tau_up)`` (1 for ``tau_up <= 0``)."""
+    xs = np.asarray(x, float)
+    z = (float(xs[0]) if xs.size else 0.0) if z0 is None else float(z0)
+    return xs, z, 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
+
+
+def exp_level_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, k: float, y_c: float,
+                  y_s: float, z0: float | None = None) -> np.ndarray:
+    """Lag with ``tau_up_s`` while rising and ``tau_down_s exp(k w)`` while falling, ``w = (z - y_c) / y_s``
+    clipped to [-2, 2] (the generic ``asymmetric_dynamics`` form).
+
+    Each step: ``z += d a``, ``d = x_k - z``, ``a = 1 - exp(-dt / tau_up_s)`` if ``d > 0`` else
+    ``dt / (tau_down_s exp(k w) + dt)``. Long signals run through :func:`_shoot_lag` (the
+    same samples to rounding), short ones one sample at a time (:func:`exp_level_lag_loop`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Input (the level the output tends to), unit of ``y_c``.
+    dt_s, tau_up_s, tau_down_s : float
+        Sample period and time constants, s (a time constant 0: follow at once).
+    k : float
+        Log-linear level slope of the falling time constant.
+    y_c, y_s : float
+        Centre and scale (> 0) of the level, unit of ``x``.
+    z0 : float, optional
+        Initial output (default ``x[0]``).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    xs, z, a_up = _lag_start(x, dt_s, tau_up_s, z0)
+    if xs.size >= _MIN_SHOOT:
+        return _shoot_lag(xs, z, a_up, _FallingLaw("exp", dt_s, tau_down_s, k, y_c, y_s))
+    return exp_level_lag_loop(xs, dt_s, tau_up_s, tau_down_s, k, y_c, y_s, z)
+
+
 def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: float, z0: float | None = None,
                    *, level_dependence: float = 0.0, level_ref: float = 1.0) -> np.ndarray:
     """First-order lag with a direction-dependent time constant.
 
     ``z`` follows ``x`` with time constant ``tau_up_s`` when ``x > z`` and
     ``tau_down_s * (1 + level_dependence * max(0, 1 - z / level_ref))`` otherwise;
-    each step is exact for the time constant in force (``1 - exp(-dt / tau)``).
+    each step is exact for the time constant in force (``1 - exp(-dt / tau)``) when
+    ``level_dependence`` is 0, else ``dt / (tau + dt)`` while falling.
+
+    Long signals run through :func:`_shoot_lag` (all segments stepped at once, the same
+    samples to rounding); short ones one sample at a time.
 
     Parameters
     ----------
@@ -168,30 +471,17 @@ def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: floa
     -------
     ndarray, shape (n,)
     """
-    xs = np.asarray(x, float)
-    a_up = 1.0 if tau_up_s <= 0 else -math.expm1(-dt_s / tau_up_s)
-    z = float(xs[0]) if z0 is None else float(z0)
-    # a per-sample recursion (the direction depends on the state): lean loops, appending to a list
-    out: list[float] = []
-    append = out.append
+    xs, z, a_up = _lag_start(x, dt_s, tau_up_s, z0)
     if level_dependence == 0.0:
         a_dn = 1.0 if tau_down_s <= 0 else -math.expm1(-dt_s / tau_down_s)
-        for xi in xs.tolist():
-            d = xi - z
-            z += d * (a_up if d > 0.0 else a_dn)
-            append(z)
+        law = _FallingLaw("const", a_dn=a_dn)
     else:
-        inv_ref = 1.0 / level_ref
-        for xi in xs.tolist():
-            d = xi - z
-            if d > 0.0:
-                z += d * a_up
-            else:
-                g = 1.0 - z * inv_ref
-                tau = tau_down_s * (1.0 + level_dependence * (g if g > 0.0 else 0.0))
-                z += d * (dt_s / (tau + dt_s) if tau > 0 else 1.0)
-            append(z)
-    return np.array(out, dtype=float)
+        law = _FallingLaw("linear", dt_s, tau_down_s, level_dependence, 0.0, level_ref)
+    if xs.size >= _MIN_SHOOT:
+        return _shoot_lag(xs, z, a_up, law)
+    if level_dependence == 0.0:
+        return _lag_loop(xs, z, a_up, a_dn)
+    return _lag_loop_linear_level(xs, z, a_up, dt_s, tau_down_s, level_dependence, level_ref)
 
 
 def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:

@@ -28,7 +28,19 @@ A model is usable when all of these hold:
    model that is wrong over part of the band). Only points whose estimate has a
    coherence of at least ``INBAND_MIN_COHERENCE`` are judged. :func:`~hasel.ident.identify`
    runs it on leakage-free estimates only (whole periods of a periodic input), whose
-   error bars hold.
+   error bars hold;
+6. the data pin the response: over the excited band, down to ``SPREAD_FLOOR`` of the
+   static gain, the output-error fit's cluster-robust standard errors of ``|G|`` (dB)
+   and of its phase (deg, with the timing offset's trade-off), times ``SPREAD_Z``,
+   stay within ``tol_db`` / ``tol_deg``;
+7. no rival: the other model orders whose held-out error ties with the chosen one's
+   (the order selection could not tell them apart) agree with it there within
+   ``tol_db`` / ``tol_deg``. A model the data cannot single out is not reported as
+   right.
+
+In 6 and 7, as in 5, the tolerances are relative to the larger of ``|G|`` and a tenth
+of the static gain: where the response is more than 20 dB down they widen by
+``0.1 |G(0)| / |G|`` (an error there moves the output little).
 
 Each failure comes with the experiment that would fix it.
 """
@@ -60,6 +72,10 @@ INBAND_REL_TOL = 0.1
 INBAND_MAX_SHARE = 0.2
 INBAND_MAX_RUN_OCTAVES = 1.0
 INBAND_MIN_COHERENCE = 0.5
+#: Response spread (checks 6, 7): coverage factor of the standard errors (95 %), and the share of the static
+#: gain below which the response is no longer judged (-26 dB, the roll-off).
+SPREAD_Z = 2.0
+SPREAD_FLOOR = 0.05
 
 
 @dataclass(frozen=True)
@@ -106,7 +122,8 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
                 static_ci: float | None = None, heldout_nrmse: float | None = None,
                 min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT, rhp_zeros_shown: bool = False,
                 noise_floor: float | None = None, measured: Any = None,
-                timing_offset_s: float = 0.0) -> ModelCheck:
+                timing_offset_s: float = 0.0, response_spread: dict[str, Any] | None = None,
+                tol_db: float = 1.0, tol_deg: float = 5.0) -> ModelCheck:
     """Run the checks of this module on a continuous transfer function.
 
     Parameters
@@ -135,6 +152,13 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
     timing_offset_s : float
         Timing offset estimated with the model, s: the measured response follows
         ``G(s) exp(-s timing_offset_s)``.
+    response_spread : dict, optional
+        For checks 6 and 7: ``f_hz`` (Hz), ``sd_db`` and ``sd_deg`` (standard errors
+        of the response there, dB and deg, or None), ``rivals`` (``(nz, np, model,
+        heldout_nrmse)`` of the tied orders) and ``score`` (the chosen model's
+        held-out NRMSE).
+    tol_db, tol_deg : float
+        Tolerances of checks 6 and 7, dB and deg.
 
     Returns
     -------
@@ -220,6 +244,8 @@ def check_model(model: Any, *, band_hz: tuple[float, float] | None, static_slope
                          "held-out part holds the same frequencies, or lower the noise")
     if measured is not None and band_hz is not None:
         _inband(model, measured, band_hz, timing_offset_s, reasons, fixes, details)
+    if response_spread is not None:
+        _spread(model, response_spread, tol_db, tol_deg, reasons, fixes, details)
     return ModelCheck(usable=not reasons, reasons=reasons, fixes=fixes, details=details)
 
 
@@ -284,6 +310,59 @@ def _inband(model: Any, measured: Any, band_hz: tuple[float, float],
                        f"{err_db[i]:+.2g} dB, {err_deg[i]:+.2g} deg, {z[i]:.2g} standard errors)")
         fixes.append("give --order (more poles) or a longer, repeated excitation over that band; if the "
                      "response depends on the operating point, identify each operating point on its own")
+
+
+def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, reasons: list[str],
+            fixes: list[str], details: dict[str, Any]) -> None:
+    """Checks 6 and 7 of the module: the response's standard errors and the tied rival orders (appends reasons)."""
+    f = np.asarray(spread["f_hz"], float)
+    if f.size == 0:
+        return
+    span = f"{f[0]:.3g}-{f[-1]:.3g} Hz"
+
+    def resp(m: Any) -> np.ndarray:
+        s = 2j * math.pi * f
+        return np.polyval(np.asarray(m.num, float), s) / np.polyval(np.asarray(m.den, float), s)
+
+    G = resp(model)
+    g0 = abs(float(np.asarray(model.num, float)[-1] / np.asarray(model.den, float)[-1]))
+    widen = np.maximum(1.0, INBAND_REL_TOL * g0 / np.maximum(np.abs(G), 1e-300)) if math.isfinite(g0) \
+        else np.ones(f.size)
+    sd_db, sd_deg = spread.get("sd_db"), spread.get("sd_deg")
+    if sd_db is not None and sd_deg is not None:
+        u_db, u_deg = SPREAD_Z * np.asarray(sd_db), SPREAD_Z * np.asarray(sd_deg)
+        details.update(response_u95_max_db=float(np.max(u_db)), response_u95_max_deg=float(np.max(u_deg)),
+                       response_checked_hz=[float(f[0]), float(f[-1])])
+        worse = np.maximum(u_db / tol_db, u_deg / tol_deg) / widen
+        if np.max(worse) > 1.0:
+            i = int(np.argmax(worse))
+            reasons.append(f"the data pin the response only to +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg at "
+                           f"{f[i]:.3g} Hz (95 %, the output-error fit's covariance over {span}; tolerance "
+                           f"{tol_db * widen[i]:.2g} dB / {tol_deg * widen[i]:.2g} deg there)")
+            fixes.append(f"excite more around {f[i]:.3g} Hz: a chirp or multisine from {f[i] / 2:.3g} to "
+                         f"{2 * f[i]:.3g} Hz repeated in whole periods, a longer log, or less noise; if the timing "
+                         "between the input and output samples is unknown, log at a higher rate")
+    worst = None
+    for nz, n_p, m, score in spread.get("rivals", []):
+        with np.errstate(all="ignore"):
+            q = resp(m) / G
+        if not np.all(np.isfinite(q)):
+            continue
+        d_db, d_deg = np.abs(20 * np.log10(np.abs(q))), np.abs(np.degrees(np.angle(q)))
+        w = np.maximum(d_db / tol_db, d_deg / tol_deg) / widen
+        i = int(np.argmax(w))
+        if worst is None or w[i] > worst[0]:
+            worst = (float(w[i]), nz, n_p, float(d_db[i]), float(d_deg[i]), float(f[i]), score,
+                     tol_db * float(widen[i]), tol_deg * float(widen[i]))
+    if worst is not None:
+        details.update(rival_max_db=worst[3], rival_max_deg=worst[4], rival_order=[worst[1], worst[2]])
+        if worst[0] > 1.0:
+            reasons.append(f"a model of order {worst[1]}/{worst[2]} fits the held-out data as well (NRMSE "
+                           f"{worst[6]:.3g} against {spread.get('score', float('nan')):.3g}) yet differs by "
+                           f"{worst[3]:.2g} dB / {worst[4]:.2g} deg at {worst[5]:.3g} Hz (tolerance {worst[7]:.2g} dB / "
+                           f"{worst[8]:.2g} deg there): the data do not single out the response there")
+            fixes.append(f"excite more around {worst[5]:.3g} Hz (a chirp or multisine through it, repeated in whole "
+                         "periods per operating point), or fix the order with --order if it is known")
 
 
 def check_model_json(model_json: dict[str, Any], *, min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT) -> ModelCheck:

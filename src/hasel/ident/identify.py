@@ -16,7 +16,13 @@ single-output system (any rate, any units) and returns an :class:`IdentResult`:
 5. a stable continuous transfer function fitted to the pooled H1, its order chosen on
    held-out frequencies (:mod:`hasel.ident.tffit`);
 6. validation: ``y_hat = h_s(v_s) + G(s) (u - v_s)`` simulated over each operating
-   point and scored (MATLAB ``compare`` fit) on its held-out tail only.
+   point and scored (MATLAB ``compare`` fit) on its held-out tail only;
+7. the model's own checks (:mod:`hasel.ident.checks`), among them how well the data
+   pin the response: the output-error fit's cluster-robust covariance (with the
+   timing offset between the channels, estimated by default) and the model orders
+   the held-out data cannot tell from the chosen one. A model the data cannot single
+   out within ``tol_db`` / ``tol_deg`` is not usable (exit 1), with the experiment
+   that would fix it.
 
 The model follows the paper's structure (12): ``z = h_s(v_s) + h_d(v_d)``, with
 ``h_d`` the fitted ``G(s)``.
@@ -49,7 +55,7 @@ from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_f
 from hasel.ident.staticmap import StaticMap, fit_static_map
 from hasel.ident.checks import ModelCheck, check_model, inband_errors
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
-from hasel.ident.timefit import arx_start, interleaved, oe_fit
+from hasel.ident.timefit import arx_start, interleaved, oe_fit, response_uncertainty
 from hasel.ident.validation import compare_fit
 from hasel.signals import uniform_grid
 
@@ -100,7 +106,9 @@ class IdentOptions:
     rel_floor : float
         Smallest relative uncertainty in the fit's weights.
     coherence_min, alpha, tol_db, tol_deg : float
-        Settings of the operating-point dependence test.
+        Settings of the operating-point dependence test; ``tol_db`` / ``tol_deg``
+        (dB, deg) are also the accuracy the model's response must be pinned to
+        (checks 6 and 7 of :mod:`hasel.ident.checks`).
     exclude_clipped : bool
         Leave out operating points whose output sits at its largest or smallest
         value in 1 % or more of the samples (a saturated sensor, e.g. the laser's
@@ -119,10 +127,15 @@ class IdentOptions:
         alongside the model, raw samples (0: none). Loggers differ by up to about a
         sample (input held or interpolated, output read at the start or the middle of
         a sample, a skew between channels); estimated, it is reported as
-        ``timing_offset_s`` instead of bending ``G(s)``'s phase. Off by default (the
-        zero-order-hold convention): on noise-free or weakly exciting logs the extra
-        freedom let the order selection over-fit (a spurious slow pole pair); 1 for
-        logs of unknown convention.
+        ``timing_offset_s`` instead of bending ``G(s)``'s phase. 1.5 by default: half a
+        sample of a first-order hold plus a skew of up to a sample (at 200 Hz half a
+        sample alone is 13 deg at 15 Hz); the offset is kept only when the held-out
+        data or the measured response ask for it (else the zero-order-hold
+        convention stands). 0 turns it off.
+    drift_knot_s : float
+        Knot spacing of the slow output baseline fitted with the output-error model,
+        s (sensor wander; see :func:`~hasel.ident.timefit.oe_fit`). 0: one constant
+        per simulated piece.
     """
 
     band_hz: tuple[float, float] | None = None
@@ -145,7 +158,8 @@ class IdentOptions:
     input_hold: str = "zoh"
     oe_max_nfev: int = 40
     min_compare_fit_pct: float = 80.0
-    max_timing_samples: float = 0.0
+    max_timing_samples: float = 1.5
+    drift_knot_s: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -380,7 +394,9 @@ class IdentResult:
             "fit": {
                 "method": "frequency-domain start (Sanathanan-Koerner, weighted log-error least squares, static "
                           "gain anchored to the static map), then output-error refinement on the whole log's "
-                          "interleaved estimation blocks; order chosen on the held-out blocks",
+                          "interleaved estimation blocks (with a slow output baseline for sensor wander and, "
+                          "when the data ask for it, a timing offset between the channels); order chosen on the "
+                          "held-out blocks",
                 "cost": fin(self.fit.cost), "rms_db": fin(self.fit.rms_db), "max_db": fin(self.fit.max_db),
                 "rms_deg": fin(self.fit.rms_deg), "max_deg": fin(self.fit.max_deg),
                 "fit_percent": fin(self.fit.fit_percent),
@@ -654,6 +670,10 @@ def _steady_means(u: np.ndarray, y: np.ndarray, rate: float) -> tuple[np.ndarray
     return np.array(xs), np.array(ys)
 
 
+#: Relative margin within which two held-out errors tie (order selection, timing offset).
+_TIE = 0.02
+
+
 def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
                    block: int, floor: float | None, measured: FreqResp, band: tuple[float, float],
                    notes: list[str]) -> Any:
@@ -662,11 +682,14 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     A sub-sample lag and a slightly different pole pair near the band's top look alike
     in the time domain; the default is the zero-order-hold convention with no offset.
     The offset is kept when the model's own share of the held-out error (the noise's
-    share taken out) or its disagreement with the measured response in the band
-    (mean squared standard errors, each capped at 100) is at least 20 % smaller with it
-    and neither is 20 % larger.
+    share taken out) is smaller with it by more than the order selection's tie margin
+    (``_TIE``, 2 %: the offset is one more parameter, judged like a model order) or its
+    disagreement with the measured response in the band (mean squared standard
+    errors, each capped at 100) is at least 20 % smaller, and neither the held-out
+    error grows by more than the tie margin nor the disagreement by 20 %.
     """
-    oe0 = oe_fit(oe.model, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev)
+    oe0 = oe_fit(oe.model, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
+                 drift_s=opts.drift_knot_s)
     f2 = (floor or 0.0) ** 2
     e_free = math.sqrt(max(oe.nrmse_heldout ** 2 - f2, 0.0))
     e_zero = math.sqrt(max(oe0.nrmse_heldout ** 2 - f2, 0.0)) if math.isfinite(oe0.nrmse_heldout) else math.inf
@@ -677,8 +700,8 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
 
     c_free, c_zero = freq_cost(oe), freq_cost(oe0)
     ms = 1e3 * oe.shift / rate
-    better = e_free < 0.8 * e_zero or (math.isfinite(c_zero) and c_free < 0.8 * c_zero)
-    worse = e_free > 1.2 * e_zero or (math.isfinite(c_free) and c_free > 1.2 * c_zero)
+    better = e_free < (1.0 - _TIE) * e_zero or (math.isfinite(c_zero) and c_free < 0.8 * c_zero)
+    worse = e_free > (1.0 + _TIE) * e_zero or (math.isfinite(c_free) and c_free > 1.2 * c_zero)
     if better and not worse:
         notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                      f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
@@ -768,7 +791,7 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
     oe2 = oe_fit(m, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
                  # the timing choice stands: estimated again only if it was kept
                  max_shift=max(float(opts.max_timing_samples), 0.0) / block if oe.shift != 0.0 else 0.0,
-                 shift0=oe.shift)
+                 shift0=oe.shift, drift_s=opts.drift_knot_s)
     z2 = oe2.model.zeros
     f2 = np.abs(z2) / (2 * np.pi)
     still = np.any((np.real(z2) > 0) & ((f2 < band[0] / 2) | (f2 > 2 * band[1])))
@@ -783,6 +806,29 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
                      f"the left half-plane (the data cannot show them) and the model refined again (held-out NRMSE {oe.nrmse_heldout:.3g} -> {oe2.nrmse_heldout:.3g})")
         return oe2, False
     return oe
+
+
+def _check_grid(model: TFModel, band: tuple[float, float], n: int = 48) -> np.ndarray:
+    """Frequencies (Hz) where the model's response is judged for how well the data pin it.
+
+    The excited band, from its low edge (at least 0.01 Hz) up to its top or the first
+    frequency where ``|G|`` falls below :data:`~hasel.ident.checks.SPREAD_FLOOR` of
+    ``|G(0)|``, whichever is lower: deeper in the roll-off a relative error moves the
+    output by little (-26 dB: a 1 dB error there is 0.6 % of a static response).
+    """
+    from hasel.ident.checks import SPREAD_FLOOR
+
+    lo, hi = max(float(band[0]), 0.01), float(band[1])
+    if not hi > lo:
+        return np.zeros(0)
+    f = np.geomspace(lo, hi, 4 * n)
+    g = np.abs(model.freqresp(f))
+    g0 = abs(model.dc_gain) if math.isfinite(model.dc_gain) else float(g[0])
+    low = np.flatnonzero(g < SPREAD_FLOOR * g0)
+    top = f[low[0]] if low.size else hi
+    if top <= lo * 1.01:
+        return np.zeros(0)
+    return np.geomspace(lo, top, n)
 
 
 def _with_residual_test(dep: DependenceTest, rd: ResidualDependence) -> DependenceTest:
@@ -991,11 +1037,11 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         if not starts:
             continue
         pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0,
-                      max_shift=max_shift) for m in starts]
+                      max_shift=max_shift, drift_s=opts.drift_knot_s) for m in starts]
         pre_cost = np.array([p.nrmse_estimate for p in pre], float)
         best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
         oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
-                    max_nfev=opts.oe_max_nfev, max_shift=max_shift)
+                    max_nfev=opts.oe_max_nfev, max_shift=max_shift, drift_s=opts.drift_knot_s)
         score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
         # the starts themselves compete too (a refinement that does not generalise loses on held-out data)
         for pr in pre:
@@ -1003,7 +1049,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             if math.isfinite(sc) and sc < score:
                 oe, score = pr, sc
         candidates.append((nz, n_p, start, oe, score))
-        if score < (1.0 - 0.02) * best:
+        if score < (1.0 - _TIE) * best:
             stale = 0
         else:
             stale += 1
@@ -1012,7 +1058,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             break
     if not candidates:
         raise BadInputError(f"too few frequency points ({fit_data.f_hz.size}) for any model order")
-    ok = [c for c in candidates if c[4] <= 1.02 * best + 1e-12] or candidates
+    ok = [c for c in candidates if c[4] <= (1.0 + _TIE) * best + 1e-12] or candidates
     nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
     floor, floor_how = (_noise_floor(yy, segs, fr, oe_block, yd_all, oe.y_hat, pieces, band, oe_rate)
                         if hold > 0 else (None, ""))
@@ -1021,6 +1067,17 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     # after the timing choice: a refit without the offset may bring back a far right-half-plane zero
     oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)
+    # how well the data pin the response: the fit's own covariance, and the models the held-out data cannot
+    # tell apart from it (checks 6 and 7 of hasel.ident.checks)
+    f_chk = _check_grid(model, band)
+    resp_spread = None
+    if f_chk.size:
+        sd = response_uncertainty(oe, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold, block=oe_block,
+                                  max_shift=max_shift if oe.shift != 0.0 else 0.0, drift_s=opts.drift_knot_s)
+        resp_spread = {"f_hz": f_chk, "sd_db": None if sd is None else sd[0], "sd_deg": None if sd is None else sd[1],
+                       "rivals": [(c[0], c[1], c[3].model, float(c[4])) for c in ok
+                                  if (c[0], c[1]) != (nz, n_p) and math.isfinite(c[4])],
+                       "score": float(oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate)}
     scores = [OrderScore(c[0], c[1], float(c[3].nrmse_estimate), float(c[4])) for c in candidates]
     try:
         fit = quality(model, fit_data, nz, n_p, float(oe.nrmse_estimate), scores)
@@ -1050,7 +1107,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         validation = Validation(compare_fit_pct=100.0 * (1.0 - oe.nrmse_heldout), nrmse=oe.nrmse_heldout,
                                 per_segment_pct=per_pct, holdout_fraction=hold)
     # the calibrated dependence test: residuals of the one model, operating point by operating point
-    if not local and len(segs) >= 2 and segs[0].source != "whole log":
+    if len(segs) >= 2 and segs[0].source != "whole log":
         rd = residual_dependence(yd_all, oe.y_hat, [(s.i0 // M, s.i1 // M) for s in segs], fs)
         if rd is not None:
             dep = _with_residual_test(dep, rd)
@@ -1074,7 +1131,8 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
                         static_ci=static_ci, heldout_nrmse=None if validation is None else validation.nrmse,
                         min_compare_fit_pct=opts.min_compare_fit_pct, rhp_zeros_shown=rhp_shown,
                         noise_floor=floor, measured=fit_data if fr.periodic else None,
-                        timing_offset_s=-float(oe.shift) / oe_rate)
+                        timing_offset_s=-float(oe.shift) / oe_rate, response_spread=resp_spread,
+                        tol_db=opts.tol_db, tol_deg=opts.tol_deg)
     if not fr.periodic:
         notes.append("the model was not checked against the measured frequency response in the band: a "
                      "non-periodic input's Welch estimate carries a leakage and transient bias that its error "

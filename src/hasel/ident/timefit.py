@@ -254,7 +254,7 @@ def _from_theta(theta: np.ndarray, nz: int, n_p: int, w0: float) -> TFModel:
 
 def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *, hold: str = "zoh",
            block: int = 1, max_nfev: int = 60, log_pmin: float | None = None, max_shift: float = 0.0,
-           shift0: float = 0.0, offset: float = 0.0) -> OEResult:
+           shift0: float = 0.0, offset: float = 0.0, drift_s: float = 0.0) -> OEResult:
     """Refine ``model0`` (same orders) by output error on ``pieces.estimate``; score on ``pieces.heldout``.
 
     Parameters
@@ -280,6 +280,15 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     offset : float
         A fixed timing offset added to the estimated one, samples (as
         :func:`simulate_zoh`'s ``shift``).
+    drift_s : float
+        Knot spacing of a slow output baseline fitted with the model, s (0: one
+        constant per piece). A sensor that wanders (thermal drift of a laser, a
+        strain gauge) adds a slow offset that an output-error fit would otherwise
+        bend the model's slow poles and static gain to follow. The baseline is
+        piecewise linear between knots ``drift_s`` apart, fitted by least squares on
+        the estimation samples only (linear in its coefficients: projected out at
+        each evaluation) and interpolated across the held-out blocks; pieces shorter
+        than two knot spacings keep one constant.
 
     Returns
     -------
@@ -309,6 +318,8 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
     def total_shift(theta: np.ndarray) -> float:
         return offset + shift_of(theta)
 
+    bases = [_baseline_basis(i1 - i0, est[i0:i1], rate_hz, drift_s) for i0, i1 in pieces.bounds]
+
     def sim(theta: np.ndarray) -> tuple[np.ndarray, list[float]]:
         sh = total_shift(theta)
         th = theta[:n_th]
@@ -321,9 +332,14 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
         m = _from_theta(th, nz, n_p, w0)
         out = np.empty_like(y)
         levels = []
-        for i0, i1 in pieces.bounds:
+        for (i0, i1), basis in zip(pieces.bounds, bases):
             ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
             e = est[i0:i1]
+            if basis is not None:
+                base = basis(y[i0:i1][e] - ys[e])
+                out[i0:i1] = ys + base
+                levels.append(float(np.mean(base)))
+                continue
             c = float(np.mean(y[i0:i1][e] - ys[e])) if np.any(e) else float(np.mean(y[i0:i1] - ys))
             out[i0:i1] = ys + c
             levels.append(c)
@@ -352,6 +368,51 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
             yh, levels = np.full(y.shape, np.nan), [float("nan")] * len(pieces.bounds)
     return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh,
                     shift_of(theta))
+
+
+class _Baseline:
+    """A piecewise-linear baseline over one piece, knots ``drift_s`` apart, fitted on its estimation samples.
+
+    The hat functions are sparse (two per sample): their Gram matrix and right-hand side are
+    sums over the samples, so one fit costs O(n), not O(n K).
+    """
+
+    def __init__(self, n: int, est: np.ndarray, rate_hz: float, drift_s: float):
+        k = int(np.floor(n / (drift_s * rate_hz)))
+        x = np.arange(n, dtype=float) * (k / max(n - 1.0, 1.0))
+        self.j = np.minimum(np.floor(x).astype(int), k - 1)
+        self.w = x - self.j
+        self.k = k
+        self.est = est
+        je, we = self.j[est], self.w[est]
+        gram = np.zeros((k + 1, k + 1))
+        np.add.at(gram, (je, je), (1 - we) ** 2)
+        np.add.at(gram, (je + 1, je + 1), we ** 2)
+        np.add.at(gram, (je, je + 1), (1 - we) * we)
+        np.add.at(gram, (je + 1, je), (1 - we) * we)
+        ev = np.linalg.eigvalsh(gram)
+        self.ok = bool(ev[0] > 1e-9 * ev[-1])
+        self.inv = np.linalg.inv(gram) if self.ok else None
+        self.je, self.we = je, we
+
+    def __call__(self, r_est: np.ndarray) -> np.ndarray:
+        """The least-squares baseline of the residual ``r_est`` (on the estimation samples) over the whole piece."""
+        rhs = (np.bincount(self.je, (1 - self.we) * r_est, self.k + 1)
+               + np.bincount(self.je + 1, self.we * r_est, self.k + 1))
+        c = self.inv @ rhs
+        return c[self.j] * (1 - self.w) + c[self.j + 1] * self.w
+
+
+def _baseline_basis(n: int, est: np.ndarray, rate_hz: float, drift_s: float) -> _Baseline | None:
+    """The slow baseline of a piece of ``n`` samples (see :class:`_Baseline`), or None.
+
+    None when ``drift_s`` is 0, the piece is shorter than two knot spacings, or the fit
+    would be ill-posed (a knot interval without estimation samples).
+    """
+    if drift_s <= 0 or n < 2 * drift_s * rate_hz or np.count_nonzero(est) < 16:
+        return None
+    b = _Baseline(n, est, rate_hz, drift_s)
+    return b if b.ok else None
 
 
 def _levenberg_marquardt(resid, theta0: np.ndarray, r0: np.ndarray, max_iter: int) -> np.ndarray:
@@ -463,3 +524,123 @@ def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pi
         return None
     num = num[-n:] if num.size > n else num
     return TFModel(num=np.asarray(num, float) / den[0], den=np.asarray(den, float) / den[0])
+
+
+def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces,
+                         f_hz: np.ndarray, *, hold: str = "zoh", block: int = 1, max_shift: float = 0.0,
+                         drift_s: float = 0.0, cluster_s: float = 2.0) -> tuple[np.ndarray, np.ndarray] | None:
+    """Standard errors of ``oe.model``'s response at ``f_hz`` in dB and deg, from the output-error fit's covariance.
+
+    The parameters are those of :func:`oe_fit` (with the timing offset when
+    ``max_shift > 0``: its trade-off with the model's phase is part of the error).
+    Their covariance is the cluster-robust (sandwich) estimate
+    ``(J'J)^-1 (sum_c J_c' r_c r_c' J_c) (J'J)^-1`` over contiguous clusters of
+    ``cluster_s`` seconds of estimation samples: it holds for coloured noise, sensor
+    wander and the part of a model error that looks like noise, where the white-noise
+    ``s^2 (J'J)^-1`` is optimistic. Directions of the parameters the data do not
+    see at all (eigenvalues of ``J'J`` below 1e-10 of the largest, e.g. a nearly
+    cancelling pole-zero pair) are left out (a pseudo-inverse). Returns None when the
+    simulation fails.
+
+    Parameters
+    ----------
+    oe : OEResult
+        The fit (its model and timing offset are the point of expansion).
+    u, y, rate_hz, pieces, hold, block, drift_s :
+        As given to :func:`oe_fit`.
+    f_hz : ndarray
+        Frequencies, Hz.
+    max_shift : float
+        As given to :func:`oe_fit` (0: the timing offset was not estimated).
+    cluster_s : float
+        Length of the clusters, s.
+
+    Returns
+    -------
+    (sd_db, sd_deg) : tuple of ndarray, or None
+    """
+    m0 = oe.model
+    w0 = float(np.max(np.abs(np.roots(m0.den)))) if m0.den.size > 1 else 1.0
+    w0 = max(w0, 1e-6)
+    theta, nz, n_p = _to_theta(m0, w0)
+    n_th = theta.size
+    shift_free = max_shift > 0
+    est = pieces.estimate
+    bases = [_baseline_basis(i1 - i0, est[i0:i1], rate_hz, drift_s) for i0, i1 in pieces.bounds]
+
+    def sim(th: np.ndarray, sh: float) -> np.ndarray:
+        m = _from_theta(th, nz, n_p, w0)
+        out = np.empty_like(y)
+        for (i0, i1), basis in zip(pieces.bounds, bases):
+            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
+            e = est[i0:i1]
+            if basis is not None:
+                out[i0:i1] = ys + basis(y[i0:i1][e] - ys[e])
+            elif np.any(e):
+                out[i0:i1] = ys + float(np.mean(y[i0:i1][e] - ys[e]))
+            else:
+                out[i0:i1] = ys + float(np.mean(y[i0:i1] - ys))
+        return out[est]
+
+    with np.errstate(all="ignore"):
+        try:
+            base = sim(theta, oe.shift)
+            r = y[est] - base
+            cols = []
+            for i in range(n_th + (1 if shift_free else 0)):
+                if i < n_th:
+                    h = 1e-6 * max(abs(theta[i]), 1e-2)
+                    tp = theta.copy()
+                    tp[i] += h
+                    cols.append((sim(tp, oe.shift) - base) / h)
+                else:
+                    h = 1e-4
+                    cols.append((sim(theta, oe.shift + h) - base) / h)
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError, StopIteration):
+            return None
+    J = np.column_stack(cols)
+    if not np.all(np.isfinite(J)) or not np.all(np.isfinite(r)):
+        return None
+    d = np.sqrt(np.maximum(np.sum(J * J, axis=0), 1e-300))
+    Jn = J / d
+    A = Jn.T @ Jn
+    # a pseudo-inverse: directions the data do not see at all (a nearly cancelling pole-zero pair moved
+    # together) carry no information, and change the response little; their numerical noise is dropped
+    try:
+        w, V = np.linalg.eigh(A)
+    except np.linalg.LinAlgError:
+        return None
+    keep = w > 1e-10 * max(float(np.max(w)), 1e-300)
+    Ainv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    # clusters: runs of estimation samples cut every cluster_s seconds
+    idx = np.flatnonzero(est)
+    L = max(int(round(cluster_s * rate_hz)), 8)
+    cut = np.flatnonzero((np.diff(idx) > 1) | (np.diff(idx // L) > 0)) + 1
+    meat = np.zeros_like(A)
+    pos = np.concatenate([[0], cut, [idx.size]])
+    for a, b in zip(pos[:-1], pos[1:]):
+        g = Jn[a:b].T @ r[a:b]
+        meat += np.outer(g, g)
+    n_cl = pos.size - 1
+    p_all = J.shape[1]
+    if n_cl <= p_all:
+        return None
+    cov_n = Ainv @ meat @ Ainv * (n_cl / (n_cl - p_all))
+    cov = cov_n / np.outer(d, d)
+    # the response's sensitivities: log G at f against the model's parameters (the timing offset is not part
+    # of G: its covariance with them still widens G's phase through the cross terms)
+    s = 2j * np.pi * np.asarray(f_hz, float)
+    G = np.polyval(m0.num, s) / np.polyval(m0.den, s)
+    D = np.zeros((s.size, p_all), complex)
+    for i in range(n_th):
+        h = 1e-6 * max(abs(theta[i]), 1e-2)
+        tp = theta.copy()
+        tp[i] += h
+        m = _from_theta(tp, nz, n_p, w0)
+        # the log of the ratio: a tiny step moves it little, with no branch cut of the phase
+        D[:, i] = np.log((np.polyval(m.num, s) / np.polyval(m.den, s)) / G) / h
+    var_re = np.einsum("fi,ij,fj->f", np.real(D), cov, np.real(D))
+    var_im = np.einsum("fi,ij,fj->f", np.imag(D), cov, np.imag(D))
+    sd_db = 20.0 / np.log(10.0) * np.sqrt(np.maximum(var_re, 0.0))
+    sd_deg = np.degrees(np.sqrt(np.maximum(var_im, 0.0)))
+    return sd_db, sd_deg
