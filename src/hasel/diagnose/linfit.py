@@ -67,24 +67,30 @@ def _arx_poles(prep: Prepared, n: int) -> np.ndarray:
     return np.concatenate([s[np.abs(s.imag) < 1e-9], s[s.imag >= 1e-9], np.conj(s[s.imag >= 1e-9])])
 
 
-def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float, offset: float = 0.0) -> list[np.ndarray]:
+def _modal_columns(poles: np.ndarray, u: np.ndarray, rate_hz: float, offset: float = 0.0,
+                   rows: np.ndarray | None = None) -> list[np.ndarray]:
     """Responses to ``u`` of ``1/(s - p)`` (real poles) and of the real and imaginary parts of
     ``1/(s - p)`` (one of each conjugate pair): exact ZOH recursions in closed form, started at
-    rest with ``u[0]``, output ``offset`` samples into each interval (as :class:`LinearSim`)."""
+    rest with ``u[0]``, output ``offset`` samples into each interval (as :class:`LinearSim`);
+    only the samples ``rows`` (a boolean mask) when given."""
     T = 1.0 / rate_hz
-    ext = np.concatenate([u, u[-1:]])
     cols = []
     for p in poles:
-        a = np.exp(p * T)
-        bb = (a - 1.0) / p
-        x0 = -u[0] / p
-        y = signal.lfilter([bb], [1.0, -a], ext[:-1], zi=[a * x0])[0]
+        real = np.imag(p) == 0
+        # a real pole in real arithmetic: the same numbers as the complex recursion, half the work
+        pp = float(np.real(p)) if real else complex(p)
+        a = np.exp(pp * T)
+        bb = (a - 1.0) / pp
+        x0 = -u[0] / pp
+        y = signal.lfilter([bb], [1.0, -a], u, zi=[a * x0])[0]
         x = np.concatenate([[x0], y])
-        mid = at_offset(x, offset)
-        if abs(np.imag(p)) > 0:
-            cols += [np.real(mid), np.imag(mid)]
+        mid = x[:-1] if offset == 0.0 else at_offset(x, offset)
+        if rows is not None:
+            mid = mid[rows]
+        if real:
+            cols.append(mid)
         else:
-            cols.append(np.real(mid))
+            cols += [mid.real, mid.imag]
     return cols
 
 
@@ -112,11 +118,15 @@ def _solve_num(prep: Prepared, poles: np.ndarray) -> tuple[np.ndarray, float, np
     for rec in prep.records:
         if not rec.train.any():
             continue
-        B = np.column_stack(_modal_columns(mp, rec.u, prep.rate_hz, prep.sample_offset) + [np.ones(rec.u.size)])
-        cols_all.append(B[rec.train])
+        cols = _modal_columns(mp, rec.u, prep.rate_hz, prep.sample_offset, rows=rec.train)
+        B = np.empty((cols[0].size, len(cols) + 1))
+        for j, c in enumerate(cols):
+            B[:, j] = c
+        B[:, -1] = 1.0
+        cols_all.append(B)
         ys.append(rec.y[rec.train])
-    A, b = np.vstack(cols_all), np.concatenate(ys)
-    scale = np.sqrt((A * A).sum(axis=0))
+    A, b = (cols_all[0], ys[0]) if len(cols_all) == 1 else (np.vstack(cols_all), np.concatenate(ys))
+    scale = np.sqrt(np.einsum("ij,ij->j", A, A))
     scale[scale == 0] = 1.0
     c = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
     r = b - A @ c
