@@ -46,3 +46,13 @@ def test_without_the_over_floor_branch_the_smaller_member_is_lost(limit_and_load
                  options=DiagnoseOptions(max_effects=2, relevant_over_floor=float("inf")))
     assert v.names == ["saturation"]
     assert v.heldout["gap_shrink"] < 0.95
+
+
+def test_far_above_the_floor_a_later_effect_needs_the_later_rounds_share_not_the_floor_side_share(limit_and_load):
+    # the load removes 45 % of a residual 19 times the floor's energy: with the floor-side share raised to
+    # 60 % it is still named, because there the two shares are one figure and min_next_gain (12 %) applies
+    t, u, y, model = limit_and_load
+    v = diagnose(t, u, y, model=model, units=("kV", "mm"), options=DiagnoseOptions(max_effects=2, min_gap_share=0.6))
+    assert v.names == ["saturation", "load_mass"]
+    second = next(r for r in v.rounds if r.get("round") == 2)
+    assert second["gap_share"] < 0.6 and second["accepted"]

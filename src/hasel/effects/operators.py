@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections import deque
 
 import numpy as np
@@ -574,12 +575,12 @@ def rate_limited(x: np.ndarray, up: float, down: float, y0: float | None = None)
         return out
     y = float(xs[0]) if y0 is None else float(y0)
     d0 = np.diff(xs, prepend=y)
-    fast = np.flatnonzero((d0 > up) | (d0 < -down))
+    fast = np.flatnonzero((d0 > up) | (d0 < -down)).tolist()
     vals = xs.tolist()
     n = xs.size
     j = 0
-    while j < fast.size:
-        k = int(fast[j])
+    while j < len(fast):
+        k = fast[j]
         y = vals[k - 1] if k > 0 else y
         while k < n:  # active: follow at the limit until the output meets the signal again
             d = vals[k] - y
@@ -594,7 +595,7 @@ def rate_limited(x: np.ndarray, up: float, down: float, y0: float | None = None)
                 break
             out[k] = y
             k += 1
-        j = int(np.searchsorted(fast, k, side="left"))  # caught up: copy until the next fast sample
+        j = bisect_left(fast, k)  # caught up: copy until the next fast sample
     return out
 
 
