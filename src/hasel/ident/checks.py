@@ -29,12 +29,13 @@ A model is usable when all of these hold:
    coherence of at least ``INBAND_MIN_COHERENCE`` are judged. :func:`~hasel.ident.identify`
    runs it on leakage-free estimates only (whole periods of a periodic input), whose
    error bars hold;
-6. the data pin the response: over the excited band, down to ``SPREAD_FLOOR`` of the
-   static gain, the output-error fit's cluster-robust standard errors of ``|G|`` (dB)
-   and of its phase (deg, with the timing offset's trade-off), times ``SPREAD_Z``,
-   stay within ``tol_db`` / ``tol_deg``;
+6. the data pin the response: over the excited band, where ``|G|`` is within 20 dB of
+   the static gain, the output-error fit's cluster-robust standard errors of ``|G|``
+   (dB) and of its phase (deg; conditional on the timing offset, which is chosen on
+   held-out data), times ``SPREAD_Z``, stay within ``tol_db`` / ``tol_deg``;
 7. no rival: the other model orders whose held-out error ties with the chosen one's
-   (the order selection could not tell them apart) agree with it there within
+   (the order selection could not tell them apart) agree with it down to
+   ``SPREAD_FLOOR`` of the static gain within
    ``tol_db`` / ``tol_deg``. A model the data cannot single out is not reported as
    right.
 
@@ -330,7 +331,12 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
         else np.ones(f.size)
     sd_db, sd_deg = spread.get("sd_db"), spread.get("sd_deg")
     if sd_db is not None and sd_deg is not None:
-        u_db, u_deg = SPREAD_Z * np.asarray(sd_db), SPREAD_Z * np.asarray(sd_deg)
+        # the covariance is judged where the response is within 20 dB of the static gain: nearer a notch or
+        # deeper in the roll-off, the linearised phase error of a steep response (a lightly damped zero pair)
+        # says more about the parameterisation than about what the data pin
+        inside = np.abs(G) >= INBAND_REL_TOL * g0 if math.isfinite(g0) else np.ones(f.size, bool)
+        u_db = np.where(inside, SPREAD_Z * np.asarray(sd_db), 0.0)
+        u_deg = np.where(inside, SPREAD_Z * np.asarray(sd_deg), 0.0)
         details.update(response_u95_max_db=float(np.max(u_db)), response_u95_max_deg=float(np.max(u_deg)),
                        response_checked_hz=[float(f[0]), float(f[-1])])
         worse = np.maximum(u_db / tol_db, u_deg / tol_deg) / widen
