@@ -686,7 +686,8 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     (``_TIE``, 2 %: the offset is one more parameter, judged like a model order) or its
     disagreement with the measured response in the band (mean squared standard
     errors, each capped at 100) is at least 20 % smaller, and neither the held-out
-    error grows by more than the tie margin nor the disagreement by 20 %.
+    error grows by more than the tie margin nor the disagreement by 20 %, and the
+    estimate is not at its bound (95 % of ``max_shift``).
     """
     # the chosen order was fitted on the zero-order-hold convention (an offset estimated alongside every
     # candidate order let the selection over-fit noise-free or non-rational logs); now with the offset free
@@ -705,12 +706,16 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     ms = 1e3 * oe.shift / rate
     better = e_free < (1.0 - _TIE) * e_zero or (math.isfinite(c_zero) and c_free < 0.8 * c_zero)
     worse = e_free > (1.0 + _TIE) * e_zero or (math.isfinite(c_free) and c_free > 1.2 * c_zero)
-    if better and not worse:
+    # an estimate at its bound is not a sampling convention (those are within about a sample): the data ask
+    # for a lag the convention cannot explain, which belongs to the dynamics (or to --delay)
+    at_bound = max_shift > 0 and abs(oe.shift) >= 0.95 * max_shift
+    if better and not worse and not at_bound:
         notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                      f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
                      f"in-band disagreement {c_free:.3g} against {c_zero:.3g}")
         return oe
-    notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms) changes the held-out "
+    notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms"
+                 f"{', at its bound' if at_bound else ''}) changes the held-out "
                  f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
                  f"to {c_free:.3g}; the zero-order-hold convention is kept")
     return oe0
