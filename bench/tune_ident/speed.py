@@ -1,6 +1,7 @@
 """Wall time of identify on one 1 kHz and one 10 kHz log, for two source trees in one run.
 
 Usage: python bench/tune_ident/speed.py [--before DIR_WITH_hasel] [--design paper_chirp3] [--repeat 2]
+       [--rates 1000,10000]
 ``--before`` is a directory holding another version's ``hasel`` package (e.g. from
 ``git archive BASE src/hasel``); each tree runs in its own process, alternately, and the
 best of ``--repeat`` runs is kept. Prints seconds per log and the ratio before/after.
@@ -38,9 +39,10 @@ def main() -> int:
     ap.add_argument("--before", required=True)
     ap.add_argument("--design", default="paper_chirp3")
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--rates", default="1000,10000")
     a = ap.parse_args()
     after_tree = os.path.join(HERE, "..", "..", "src")
-    for rate in (1000.0, 10000.0):
+    for rate in [float(r) for r in a.rates.split(",")]:
         best = {"before": float("inf"), "after": float("inf")}
         for _ in range(a.repeat):
             for name, tree in (("before", a.before), ("after", after_tree)):

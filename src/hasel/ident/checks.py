@@ -29,12 +29,13 @@ A model is usable when all of these hold:
    coherence of at least ``INBAND_MIN_COHERENCE`` are judged. :func:`~hasel.ident.identify`
    runs it on leakage-free estimates only (whole periods of a periodic input), whose
    error bars hold;
-6. the data pin the response: over the excited band, down to ``SPREAD_FLOOR`` of the
-   static gain, the output-error fit's cluster-robust standard errors of ``|G|`` (dB)
-   and of its phase (deg, with the timing offset's trade-off), times ``SPREAD_Z``,
-   stay within ``tol_db`` / ``tol_deg``;
+6. the data pin the response: over the excited band, where ``|G|`` is within 20 dB of
+   the static gain, the output-error fit's cluster-robust standard errors of ``|G|``
+   (dB) and of its phase (deg; conditional on the timing offset, which is chosen on
+   held-out data), times ``SPREAD_Z``, stay within ``tol_db`` / ``tol_deg``;
 7. no rival: the other model orders whose held-out error ties with the chosen one's
-   (the order selection could not tell them apart) agree with it there within
+   (the order selection could not tell them apart) agree with it down to
+   ``SPREAD_FLOOR`` of the static gain within ``RIVAL_FACTOR`` times
    ``tol_db`` / ``tol_deg``. A model the data cannot single out is not reported as
    right.
 
@@ -73,9 +74,12 @@ INBAND_MAX_SHARE = 0.2
 INBAND_MAX_RUN_OCTAVES = 1.0
 INBAND_MIN_COHERENCE = 0.5
 #: Response spread (checks 6, 7): coverage factor of the standard errors (95 %), and the share of the static
-#: gain below which the response is no longer judged (-26 dB, the roll-off).
+#: gain below which the response is no longer judged (-20 dB, the roll-off; as check 5's floor).
 SPREAD_Z = 2.0
-SPREAD_FLOOR = 0.05
+SPREAD_FLOOR = 0.1
+#: Check 7 refuses when a tied rival differs by more than this many tolerances (a difference of one tolerance
+#: between two models that fit alike bounds neither's error by it; twice it, one of them is off by more).
+RIVAL_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -330,7 +334,12 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
         else np.ones(f.size)
     sd_db, sd_deg = spread.get("sd_db"), spread.get("sd_deg")
     if sd_db is not None and sd_deg is not None:
-        u_db, u_deg = SPREAD_Z * np.asarray(sd_db), SPREAD_Z * np.asarray(sd_deg)
+        # the covariance is judged where the response is within 20 dB of the static gain: nearer a notch or
+        # deeper in the roll-off, the linearised phase error of a steep response (a lightly damped zero pair)
+        # says more about the parameterisation than about what the data pin
+        inside = np.abs(G) >= INBAND_REL_TOL * g0 if math.isfinite(g0) else np.ones(f.size, bool)
+        u_db = np.where(inside, SPREAD_Z * np.asarray(sd_db), 0.0)
+        u_deg = np.where(inside, SPREAD_Z * np.asarray(sd_deg), 0.0)
         details.update(response_u95_max_db=float(np.max(u_db)), response_u95_max_deg=float(np.max(u_deg)),
                        response_checked_hz=[float(f[0]), float(f[-1])])
         worse = np.maximum(u_db / tol_db, u_deg / tol_deg) / widen
@@ -356,11 +365,11 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
                      tol_db * float(widen[i]), tol_deg * float(widen[i]))
     if worst is not None:
         details.update(rival_max_db=worst[3], rival_max_deg=worst[4], rival_order=[worst[1], worst[2]])
-        if worst[0] > 1.0:
+        if worst[0] > RIVAL_FACTOR:
             reasons.append(f"a model of order {worst[1]}/{worst[2]} fits the held-out data as well (NRMSE "
                            f"{worst[6]:.3g} against {spread.get('score', float('nan')):.3g}) yet differs by "
-                           f"{worst[3]:.2g} dB / {worst[4]:.2g} deg at {worst[5]:.3g} Hz (tolerance {worst[7]:.2g} dB / "
-                           f"{worst[8]:.2g} deg there): the data do not single out the response there")
+                           f"{worst[3]:.2g} dB / {worst[4]:.2g} deg at {worst[5]:.3g} Hz (beyond {RIVAL_FACTOR:g} x the "
+                           f"tolerance {worst[7]:.2g} dB / {worst[8]:.2g} deg there): the data do not single out the response there")
             fixes.append(f"excite more around {worst[5]:.3g} Hz (a chirp or multisine through it, repeated in whole "
                          "periods per operating point), or fix the order with --order if it is known")
 

@@ -676,8 +676,8 @@ _TIE = 0.02
 
 def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
                    block: int, floor: float | None, measured: FreqResp, band: tuple[float, float],
-                   notes: list[str]) -> Any:
-    """Keep the estimated timing offset only if the data ask for it; else refit without one.
+                   notes: list[str], max_shift: float) -> Any:
+    """Refit the chosen order with a timing offset (at most ``max_shift`` samples); keep it only if the data ask.
 
     A sub-sample lag and a slightly different pole pair near the band's top look alike
     in the time domain; the default is the zero-order-hold convention with no offset.
@@ -686,10 +686,14 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     (``_TIE``, 2 %: the offset is one more parameter, judged like a model order) or its
     disagreement with the measured response in the band (mean squared standard
     errors, each capped at 100) is at least 20 % smaller, and neither the held-out
-    error grows by more than the tie margin nor the disagreement by 20 %.
+    error grows by more than the tie margin nor the disagreement by 20 %, and the
+    estimate is not at its bound (95 % of ``max_shift``).
     """
-    oe0 = oe_fit(oe.model, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
-                 drift_s=opts.drift_knot_s)
+    # the chosen order was fitted on the zero-order-hold convention (an offset estimated alongside every
+    # candidate order let the selection over-fit noise-free or non-rational logs); now with the offset free
+    oe0 = oe
+    oe = oe_fit(oe0.model, u, y, rate, pieces, hold=opts.input_hold, block=block, max_nfev=opts.oe_max_nfev,
+                max_shift=max_shift, drift_s=opts.drift_knot_s)
     f2 = (floor or 0.0) ** 2
     e_free = math.sqrt(max(oe.nrmse_heldout ** 2 - f2, 0.0))
     e_zero = math.sqrt(max(oe0.nrmse_heldout ** 2 - f2, 0.0)) if math.isfinite(oe0.nrmse_heldout) else math.inf
@@ -702,12 +706,16 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     ms = 1e3 * oe.shift / rate
     better = e_free < (1.0 - _TIE) * e_zero or (math.isfinite(c_zero) and c_free < 0.8 * c_zero)
     worse = e_free > (1.0 + _TIE) * e_zero or (math.isfinite(c_free) and c_free > 1.2 * c_zero)
-    if better and not worse:
+    # an estimate at its bound is not a sampling convention (those are within about a sample): the data ask
+    # for a lag the convention cannot explain, which belongs to the dynamics (or to --delay)
+    at_bound = max_shift > 0 and abs(oe.shift) >= 0.95 * max_shift
+    if better and not worse and not at_bound:
         notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                      f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
                      f"in-band disagreement {c_free:.3g} against {c_zero:.3g}")
         return oe
-    notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms) changes the held-out "
+    notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms"
+                 f"{', at its bound' if at_bound else ''}) changes the held-out "
                  f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
                  f"to {c_free:.3g}; the zero-order-hold convention is kept")
     return oe0
@@ -1037,11 +1045,11 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         if not starts:
             continue
         pre = [oe_fit(m, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block, max_nfev=0,
-                      max_shift=max_shift, drift_s=opts.drift_knot_s) for m in starts]
+                      drift_s=opts.drift_knot_s) for m in starts]
         pre_cost = np.array([p.nrmse_estimate for p in pre], float)
         best_start = starts[int(np.argmin(np.where(np.isfinite(pre_cost), pre_cost, np.inf)))]
         oe = oe_fit(best_start, ud_all, yd_all, oe_rate, pieces, hold=opts.input_hold, block=oe_block,
-                    max_nfev=opts.oe_max_nfev, max_shift=max_shift, drift_s=opts.drift_knot_s)
+                    max_nfev=opts.oe_max_nfev, drift_s=opts.drift_knot_s)
         score = oe.nrmse_heldout if hold > 0 else oe.nrmse_estimate
         # the starts themselves compete too (a refinement that does not generalise loses on held-out data)
         for pr in pre:
@@ -1063,7 +1071,8 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     floor, floor_how = (_noise_floor(yy, segs, fr, oe_block, yd_all, oe.y_hat, pieces, band, oe_rate)
                         if hold > 0 else (None, ""))
     if max_shift > 0 and hold > 0 and math.isfinite(oe.nrmse_heldout):
-        oe = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data, band, notes)
+        oe = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data, band, notes,
+                            max_shift)
     # after the timing choice: a refit without the offset may bring back a far right-half-plane zero
     oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
     model = TFModel(oe.model.num, oe.model.den, start.model.delay_s if start is not None else 0.0)
@@ -1073,7 +1082,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     resp_spread = None
     if f_chk.size:
         sd = response_uncertainty(oe, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold, block=oe_block,
-                                  max_shift=max_shift if oe.shift != 0.0 else 0.0, drift_s=opts.drift_knot_s)
+                                  max_shift=0.0, drift_s=opts.drift_knot_s)
         resp_spread = {"f_hz": f_chk, "sd_db": None if sd is None else sd[0], "sd_deg": None if sd is None else sd[1],
                        "rivals": [(c[0], c[1], c[3].model, float(c[4])) for c in ok
                                   if (c[0], c[1]) != (nz, n_p) and math.isfinite(c[4])],
