@@ -14,36 +14,34 @@ from hasel.effects.operators import asymmetric_lag, exp_level_lag
 N = 3 * operators._MIN_SHOOT + 17  # long enough for the shooting kernel, not a whole number of segments
 
 
-def _truth_definition(x, dt, tau_up, tau_dn, z0, level_dependence=0.0, level_ref=1.0):
-    """``asymmetric_lag`` as its docstring states it, one sample at a time."""
+def _per_sample(x, dt, tau_up, z0, falling_share):
+    """The rise-or-fall recursion one sample at a time: ``z += d a``, ``a`` from ``tau_up`` while
+    rising, ``falling_share(z)`` while falling."""
     a_up = -math.expm1(-dt / tau_up) if tau_up > 0 else 1.0
     z, out = z0, []
     for xi in x:
         d = xi - z
-        if d > 0.0:
-            z += d * a_up
-        elif level_dependence == 0.0:
-            z += d * (-math.expm1(-dt / tau_dn) if tau_dn > 0 else 1.0)
-        else:
-            tau = tau_dn * (1.0 + level_dependence * max(0.0, 1.0 - z / level_ref))
-            z += d * (dt / (tau + dt) if tau > 0 else 1.0)
+        z += d * (a_up if d > 0.0 else falling_share(z))
         out.append(z)
     return np.array(out)
+
+
+def _truth_definition(x, dt, tau_up, tau_dn, z0, level_dependence=0.0, level_ref=1.0):
+    """``asymmetric_lag`` as its docstring states it, one sample at a time."""
+    def falling_share(z):
+        if level_dependence == 0.0:
+            return -math.expm1(-dt / tau_dn) if tau_dn > 0 else 1.0
+        tau = tau_dn * (1.0 + level_dependence * max(0.0, 1.0 - z / level_ref))
+        return dt / (tau + dt) if tau > 0 else 1.0
+    return _per_sample(x, dt, tau_up, z0, falling_share)
 
 
 def _generic_definition(x, dt, tau_up, tau_dn, k, y_c, y_s, z0):
     """The generic lag: ``tau_dn exp(k clip((z - y_c) / y_s, -2, 2))`` while falling."""
-    a_up = -math.expm1(-dt / tau_up) if tau_up > 0 else 1.0
-    z, out = z0, []
-    for xi in x:
-        d = xi - z
-        if d > 0.0:
-            z += d * a_up
-        else:
-            w = min(max((z - y_c) / y_s, -2.0), 2.0)
-            z += d * (dt / (tau_dn * math.exp(k * w) + dt))
-        out.append(z)
-    return np.array(out)
+    def falling_share(z):
+        w = min(max((z - y_c) / y_s, -2.0), 2.0)
+        return dt / (tau_dn * math.exp(k * w) + dt)
+    return _per_sample(x, dt, tau_up, z0, falling_share)
 
 
 def _signal(rng, kind):
