@@ -329,21 +329,8 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
             q[1:2 * (n_p // 2):2] = np.maximum(q[1:2 * (n_p // 2):2], 2 * lo_bound)
             if n_p % 2:
                 q[-1] = max(q[-1], lo_bound)
-        m = _from_theta(th, nz, n_p, w0)
-        out = np.empty_like(y)
-        levels = []
-        for (i0, i1), basis in zip(pieces.bounds, bases):
-            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
-            e = est[i0:i1]
-            if basis is not None:
-                base = basis(y[i0:i1][e] - ys[e])
-                out[i0:i1] = ys + base
-                levels.append(float(np.mean(base)))
-                continue
-            c = float(np.mean(y[i0:i1][e] - ys[e])) if np.any(e) else float(np.mean(y[i0:i1] - ys))
-            out[i0:i1] = ys + c
-            levels.append(c)
-        return out, levels
+        return _simulate_pieces(_from_theta(th, nz, n_p, w0), u, y, rate_hz, pieces, bases, hold=hold, block=block,
+                                shift=sh)
 
     scale = float(np.std(y[est])) or 1.0
 
@@ -368,6 +355,32 @@ def oe_fit(model0: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces
             yh, levels = np.full(y.shape, np.nan), [float("nan")] * len(pieces.bounds)
     return OEResult(model, _nrmse(y, yh, pieces, est), _nrmse(y, yh, pieces, pieces.heldout), levels, yh,
                     shift_of(theta))
+
+
+def _simulate_pieces(m: TFModel, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces,
+                     bases: list["_Baseline | None"], *, hold: str, block: int,
+                     shift: float) -> tuple[np.ndarray, list[float]]:
+    """The model's output over every piece (each simulated from rest, input relative to its first
+    sample), plus each piece's output level: its slow baseline (``bases``) where it has one, else the
+    constant that best fits its estimation samples (all its samples when it has none).
+
+    Returns the simulated output (output unit) and each piece's mean level.
+    """
+    est = pieces.estimate
+    out = np.empty_like(y)
+    levels = []
+    for (i0, i1), basis in zip(pieces.bounds, bases):
+        ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=shift)
+        e = est[i0:i1]
+        if basis is not None:
+            base = basis(y[i0:i1][e] - ys[e])
+            out[i0:i1] = ys + base
+            levels.append(float(np.mean(base)))
+            continue
+        c = float(np.mean(y[i0:i1][e] - ys[e])) if np.any(e) else float(np.mean(y[i0:i1] - ys))
+        out[i0:i1] = ys + c
+        levels.append(c)
+    return out, levels
 
 
 class _Baseline:
@@ -569,17 +582,8 @@ def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: fl
     bases = [_baseline_basis(i1 - i0, est[i0:i1], rate_hz, drift_s) for i0, i1 in pieces.bounds]
 
     def sim(th: np.ndarray, sh: float) -> np.ndarray:
-        m = _from_theta(th, nz, n_p, w0)
-        out = np.empty_like(y)
-        for (i0, i1), basis in zip(pieces.bounds, bases):
-            ys = simulate_zoh(m, u[i0:i1] - u[i0], rate_hz, hold=hold, block=block, shift=sh)
-            e = est[i0:i1]
-            if basis is not None:
-                out[i0:i1] = ys + basis(y[i0:i1][e] - ys[e])
-            elif np.any(e):
-                out[i0:i1] = ys + float(np.mean(y[i0:i1][e] - ys[e]))
-            else:
-                out[i0:i1] = ys + float(np.mean(y[i0:i1] - ys))
+        out, _ = _simulate_pieces(_from_theta(th, nz, n_p, w0), u, y, rate_hz, pieces, bases, hold=hold, block=block,
+                                  shift=sh)
         return out[est]
 
     with np.errstate(all="ignore"):
