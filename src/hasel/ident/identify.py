@@ -53,7 +53,7 @@ from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_rat
                                   welch_plan)
 from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
 from hasel.ident.staticmap import StaticMap, fit_static_map
-from hasel.ident.checks import ModelCheck, check_model, inband_errors
+from hasel.ident.checks import SPREAD_FLOOR, ModelCheck, check_model, inband_errors
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
 from hasel.ident.timefit import arx_start, interleaved, oe_fit, response_uncertainty
 from hasel.ident.validation import compare_fit
@@ -824,8 +824,6 @@ def _check_grid(model: TFModel, band: tuple[float, float], n: int = 48) -> np.nd
     ``|G(0)|``, whichever is lower: deeper in the roll-off a relative error moves the
     output by little (-26 dB: a 1 dB error there is 0.6 % of a static response).
     """
-    from hasel.ident.checks import SPREAD_FLOOR
-
     lo, hi = max(float(band[0]), 0.01), float(band[1])
     if not hi > lo:
         return np.zeros(0)
