@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from hasel.cli import main as hasel_main
 from hasel.compare import load_closed_loop, nrmse
@@ -42,6 +43,24 @@ def test_compare_finds_the_recording_plant_at_the_noise_floor_and_the_nominal_fa
     again = json.loads((tmp_path / "c2.json").read_text())["plants"][0]
     # a CSV row carries the reference from its first sample on: the replay starts one sample (0.1 ms) later
     assert abs(again["stroke_nrmse"] - truth["stroke_nrmse"]) < 0.1 * truth["stroke_nrmse"]
+
+
+def test_compare_replays_a_test_whose_steps_are_held_unevenly(tmp_path):
+    """A rig's test holds each step as long as its operator chose: the replay follows those holds."""
+    holds = [0.3, 0.5, 0.25, 0.45, 0.4]
+    log = tmp_path / "uneven.mcap"
+    run_steps("laser", [2.0, 4.0, 6.0, 4.0, 2.0], holds, seed=3, plant="truth", record=str(log), quiet=True)
+    out = tmp_path / "cmp.json"
+    assert hasel_main(["compare", str(log), "--plant", "nominal", "--plant", "truth", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert res["hold_s"][:4] == pytest.approx(holds[:4], abs=2e-3)
+    assert 0.3 < res["hold_s"][4] <= 0.5  # the last step runs to the log's end
+    nominal, truth = res["plants"]
+    sig = load_signals(log, ["/plant/batch.stroke_mm", "/plant/batch.true_stroke_mm"])
+    floor = nrmse(sig["/plant/batch.stroke_mm"].values, sig["/plant/batch.true_stroke_mm"].values)
+    assert truth["stroke_nrmse"] < 1.5 * floor < 20 * truth["stroke_nrmse"] < nominal["stroke_nrmse"]
+    for m, t in zip(res["measured"]["steps"], truth["steps"]):
+        assert abs(m["rise_s"] - t["rise_s"]) < 0.005 and abs(m["overshoot_pct"] - t["overshoot_pct"]) < 3.0
 
 
 def test_compare_refuses_a_bad_plant_or_log_with_one_line(tmp_path, capsys):

@@ -17,6 +17,7 @@ import numpy as np
 from hasel.compare import (DEFAULTS, ClosedLoopLog, load_closed_loop, measured_steps, nrmse, on_log_times,
                            reference_steps)
 from hasel.errors import BadInputError
+from hasel.metrics import reference_starts
 from hasel.outputs import replacing, write_text
 from hasel.tune import PAPER_GAINS, read_gains
 
@@ -53,7 +54,7 @@ def compare(log: ClosedLoopLog, plants: list[str], *, feedback: str = "laser", s
     from hasel_sysid.steps import run_steps
 
     seq, hold, t0 = reference_steps(log)
-    duration = hold * len(seq)
+    duration = float(reference_starts(len(seq), hold)[-1])
     out: dict = {"log": log.source, "sequence_mm": seq, "hold_s": hold, "feedback": feedback, "seed": seed,
                  "gains": {**PAPER_GAINS, **(gains or {})},
                  "measured": {"steps": [m.to_json() for m in measured_steps(log, seq, hold, t0)]},

@@ -60,6 +60,7 @@ class GraphConfig:
     feedback: str = "laser"
     sequence_mm: list[float] = field(default_factory=lambda: list(paper.STEP_SEQUENCE_MM))
     hold_s: float = 1.0
+    holds_s: list[float] | None = None  # one hold per reference value (s), overriding hold_s
     seed: int = 0
     variant: str = "nominal"
     actuator: Actuator | None = None
@@ -175,7 +176,7 @@ class NodeGraph:
             if cfg.with_reference:
                 self.reference = ReferenceNode(**kw, parameter_overrides=params(
                     {"sequence_mm": [float(x) for x in cfg.sequence_mm], "hold_s": float(cfg.hold_s),
-                     "start_s": 0.0}))
+                     "start_s": 0.0, **({} if cfg.holds_s is None else {"holds_s": [float(x) for x in cfg.holds_s]})}))
                 self.nodes.append(self.reference)
             self.collector = None
             if cfg.with_collector:

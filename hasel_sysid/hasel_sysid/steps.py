@@ -17,17 +17,21 @@ import numpy as np
 
 from hasel import paper
 from hasel.errors import BadInputError
-from hasel.metrics import steps_from_sequence
+from hasel.metrics import reference_starts, steps_from_sequence
 from hasel.outputs import replacing, write_text
 from hasel.tune import PAPER_GAINS, read_gains
 
 __all__ = ["run", "run_steps", "format_table"]
 
 
-def run_steps(feedback: str, sequence: list[float], hold_s: float, *, seed: int = 0, plant: str = "nominal",
+def run_steps(feedback: str, sequence: list[float], hold_s: float | list[float], *, seed: int = 0,
+              plant: str = "nominal",
               calibration_file: str = "", record: str | None = None, quiet: bool = False,
               actuator=None, gains: dict[str, float] | None = None) -> dict:
     """Run the step test; return the JSON dict plus the signals under ``"_signals"``.
+
+    ``hold_s``: how long each reference value is held, s: one for all, or a list with one
+    per value (a rig's uneven test, as ``hasel compare`` replays it).
 
     ``gains``: controller gain parameters (``kp_plus`` ... ``kd_minus``, as
     :func:`hasel.tune.read_gains` returns them); the paper's by default.
@@ -35,8 +39,10 @@ def run_steps(feedback: str, sequence: list[float], hold_s: float, *, seed: int 
     from hasel_sysid.graph import GraphConfig, NodeGraph
     from hasel_sysid.progress import Progress
 
-    duration = hold_s * len(sequence)
-    cfg = GraphConfig(feedback=feedback, sequence_mm=sequence, hold_s=hold_s, seed=seed, variant=plant,
+    duration = float(reference_starts(len(sequence), hold_s)[-1])
+    uneven = np.ndim(hold_s) > 0
+    cfg = GraphConfig(feedback=feedback, sequence_mm=sequence, hold_s=1.0 if uneven else hold_s,
+                      holds_s=[float(h) for h in hold_s] if uneven else None, seed=seed, variant=plant,
                       calibration_file=calibration_file, actuator=actuator, controller_params=dict(gains or {}))
     extra = []
     if record:
@@ -90,7 +96,8 @@ def plot_steps(result: dict, path: str) -> None:
     s = result["_signals"]
     seq, hold = result["sequence_mm"], result["hold_s"]
     t = s["t_s"]
-    ref = np.array([seq[min(int(x / hold + 1e-9), len(seq) - 1)] for x in t])
+    starts = reference_starts(len(seq), hold)
+    ref = np.asarray(seq, float)[np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(seq) - 1)]
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(9, 6), height_ratios=[2, 1])
     ax1.plot(t, ref, "k--", lw=1, label="reference")
     ax1.plot(t, s["true_stroke_mm"], lw=1.5, label="true stroke")

@@ -86,11 +86,13 @@ def load_closed_loop(path: str | Path, *, time: str | None = None, reference: st
     raise BadInputError(f"{p}: unsupported file type {p.suffix or '(none)'}: expected .mcap or .csv")
 
 
-def reference_steps(log: ClosedLoopLog, tol_s: float = 2e-3) -> tuple[list[float], float, float]:
-    """``(sequence_mm, hold_s, t0_s)``: the reference's values, its hold per value and its start.
+def reference_steps(log: ClosedLoopLog, tol_s: float = 2e-3) -> tuple[list[float], float | list[float], float]:
+    """``(sequence_mm, hold_s, t0_s)``: the reference's values, how long each is held (s) and its start (s).
 
-    The reference must change at evenly spaced times (as ``hasel steps`` makes it), within
-    ``tol_s``; the last value is held as long as the others.
+    When the reference changes at evenly spaced times (as ``hasel steps`` makes it; within
+    ``tol_s``) ``hold_s`` is that one hold and the last value is held as long as the
+    others; otherwise (a rig's test) it is one hold per value, the last one running to
+    the end of the log but no longer than the longest of the others.
     """
     t, r = np.asarray(log.ref_t_s, float), np.asarray(log.ref_mm, float)
     keep = np.concatenate([[True], np.diff(r) != 0])
@@ -98,19 +100,24 @@ def reference_steps(log: ClosedLoopLog, tol_s: float = 2e-3) -> tuple[list[float
     if values.size < 2:
         raise BadInputError(f"{log.source}: the reference never changes ({values.size} value); nothing to compare")
     holds = np.diff(times)
-    hold = float(np.median(holds))
-    if hold <= 0 or np.max(np.abs(holds - hold)) > tol_s:
-        raise BadInputError(f"{log.source}: the reference changes at uneven times (holds "
-                            f"{', '.join(f'{h:.3f}' for h in holds)} s); compare replays evenly held references")
     end = float(log.t_s[-1])
-    if end < times[-1] + 0.5 * hold:
+    hold = float(np.median(holds))
+    if np.max(np.abs(holds - hold)) <= tol_s:
+        if end < times[-1] + 0.5 * hold:
+            raise BadInputError(f"{log.source}: the log ends {end - times[-1]:.3f} s after the last reference "
+                                f"change; it needs about {hold:.3f} s")
+        return [float(v) for v in values], hold, float(times[0])
+    last = min(end - float(times[-1]), float(np.max(holds)))
+    if last < 0.5 * float(np.min(holds)):
         raise BadInputError(f"{log.source}: the log ends {end - times[-1]:.3f} s after the last reference change; "
-                            f"it needs about {hold:.3f} s")
-    return [float(v) for v in values], hold, float(times[0])
+                            f"it needs about {np.min(holds):.3f} s to show that step")
+    return [float(v) for v in values], [float(h) for h in holds] + [last], float(times[0])
 
 
-def measured_steps(log: ClosedLoopLog, sequence: list[float], hold_s: float, t0_s: float) -> list[StepMetrics]:
-    """Per-step rise, settling and overshoot of the measured stroke (times from each step)."""
+def measured_steps(log: ClosedLoopLog, sequence: list[float], hold_s: float | list[float],
+                   t0_s: float) -> list[StepMetrics]:
+    """Per-step rise, settling and overshoot of the measured stroke (times from each step; holds
+    in s as :func:`reference_steps` gives them)."""
     return steps_from_sequence(log.t_s - t0_s, log.stroke_mm, sequence, hold_s)
 
 

@@ -19,7 +19,7 @@ the points where a graph would see them, for studying the fault handling offline
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,6 +31,7 @@ from hasel.channels import FilterChannel, StrainChannel, default_calibration
 from hasel.controller import ControllerCore, ReferenceSchedule
 from hasel.errors import BadInputError
 from hasel.faults import PlausibilityGate, StuckDetector
+from hasel.metrics import reference_starts
 from hasel.pid import DualModeConfig, DualModePid
 from hasel.simulator import PlantSimulator
 from hasel.timeconv import ns_to_s, s_to_ns
@@ -43,10 +44,11 @@ FEEDBACKS = ("laser", "strain")
 Fault = Callable[[float, float], "float | None"]
 
 
-def step_reference(sequence_mm: list[float], hold_s: float) -> ReferenceSchedule:
-    """Reference r(t) in mm holding each value of ``sequence_mm`` for ``hold_s`` seconds from t = 0.
+def step_reference(sequence_mm: list[float], hold_s: float | Sequence[float]) -> ReferenceSchedule:
+    """Reference r(t) in mm holding each value of ``sequence_mm`` for ``hold_s`` seconds from t = 0
+    (one hold for every value, or one per value: :func:`hasel.metrics.reference_starts`).
 
-    The schedule the reference node publishes (value i stamped ``i * hold_s``); call it
+    The schedule the reference node publishes (value i stamped at its start); call it
     with a time in s for the value then.
     """
     seq = [float(x) for x in sequence_mm]
@@ -55,8 +57,8 @@ def step_reference(sequence_mm: list[float], hold_s: float) -> ReferenceSchedule
     if not np.all(np.isfinite(seq)):
         raise BadInputError(f"the reference sequence must be finite, got {seq}")
     schedule = ReferenceSchedule()
-    for i, r in enumerate(seq):
-        schedule.set(s_to_ns(i * hold_s), r)
+    for t, r in zip(reference_starts(len(seq), hold_s), seq):
+        schedule.set(s_to_ns(float(t)), r)
     return schedule
 
 

@@ -3,13 +3,14 @@ settling, overshoot) and the normalised error of a simulation against a measurem
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from hasel.errors import BadInputError
 
-__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "nrmse"]
+__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "reference_starts", "nrmse"]
 
 
 def nrmse(y: np.ndarray, y_hat: np.ndarray, *, bias_free: bool = False) -> float:
@@ -107,8 +108,25 @@ def step_metrics(t_s: np.ndarray, y: np.ndarray, t_step_s: float, t_end_s: float
     return StepMetrics(from_mm, to_mm, mode, rise, settling, overshoot)
 
 
+def reference_starts(n: int, hold_s: float | Sequence[float]) -> np.ndarray:
+    """Times (s, from the first reference) at which each of ``n`` references starts, and the end.
+
+    ``hold_s`` is one hold for every value (s) or one per value (``n`` of them, each
+    positive and finite): a rig's test need not hold its steps evenly. Returns ``n + 1``
+    times, the first 0.
+    """
+    holds = np.full(n, float(hold_s)) if np.ndim(hold_s) == 0 else np.asarray(hold_s, float)
+    if holds.shape != (n,):
+        raise BadInputError(f"{n} references need {n} holds, got {holds.size}")
+    if not np.all(np.isfinite(holds) & (holds > 0)):
+        raise BadInputError(f"every hold must be a positive finite time in s, got {holds.tolist()}")
+    return np.concatenate([[0.0], np.cumsum(holds)])
+
+
 def steps_from_sequence(t_s: np.ndarray, y: np.ndarray, sequence_mm: list[float],
-                        hold_s: float) -> list[StepMetrics]:
-    """Metrics of each step of a reference held ``hold_s`` per value (the first value is the start)."""
-    return [step_metrics(t_s, y, i * hold_s, (i + 1) * hold_s, sequence_mm[i - 1], sequence_mm[i])
+                        hold_s: float | Sequence[float]) -> list[StepMetrics]:
+    """Metrics of each step of a reference holding its values ``hold_s`` (s; one for all or one
+    per value, see :func:`reference_starts`); the first value is the start, times from it."""
+    starts = reference_starts(len(sequence_mm), hold_s)
+    return [step_metrics(t_s, y, starts[i], starts[i + 1], sequence_mm[i - 1], sequence_mm[i])
             for i in range(1, len(sequence_mm))]

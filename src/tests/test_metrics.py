@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hasel.errors import BadInputError
-from hasel.metrics import nrmse, step_metrics
+from hasel.metrics import nrmse, reference_starts, step_metrics, steps_from_sequence
 
 
 def test_first_order_rise_and_settling_closed_form():
@@ -65,3 +65,26 @@ def test_the_callers_share_one_nrmse():
     from hasel.ident import validation
 
     assert compare.nrmse is prep.nrmse is validation.nrmse is nrmse
+
+
+def test_uneven_holds_window_each_step_at_its_own_start():
+    """A rig's test need not hold its steps evenly: each step is judged from its own start to the next."""
+    starts = reference_starts(3, [0.5, 1.5, 0.25])
+    assert starts.tolist() == [0.0, 0.5, 2.0, 2.25]
+    t = np.arange(0.0, 2.25, 1e-3)
+    # first-order responses with different time constants per step, each restarting at its step
+    y = np.where(t < 0.5, 2.0, np.where(t < 2.0, 2.0 + 2.0 * (1 - np.exp(-(t - 0.5) / 0.1)),
+                                         4.0 - 1.0 * (1 - np.exp(-(t - 2.0) / 0.02))))
+    a, b = steps_from_sequence(t, y, [2.0, 4.0, 3.0], [0.5, 1.5, 0.25])
+    assert a.rise_s == pytest.approx(0.1 * math.log(9), abs=2e-3)
+    assert b.rise_s == pytest.approx(0.02 * math.log(9), abs=2e-3) and b.mode == "relaxation"
+    # one hold for all gives the windows of the evenly held test
+    assert reference_starts(3, 0.5).tolist() == [0.0, 0.5, 1.0, 1.5]
+
+
+@pytest.mark.parametrize("holds, words", [([0.5, 0.5], "3 references need 3 holds"),
+                                          ([0.5, -1.0, 0.5], "positive finite"),
+                                          ([0.5, math.nan, 0.5], "positive finite")])
+def test_bad_holds_are_refused(holds, words):
+    with pytest.raises(BadInputError, match=words):
+        reference_starts(3, holds)
