@@ -159,10 +159,18 @@ def _run(args: argparse.Namespace, say: Progress) -> int:
     say(f"loading {args.data}")
     data = load_io(args.data, time=args.time, input=args.input, output=args.output)
     held = None
+    logs = [data]
     if args.heldout:
         say(f"loading {args.heldout}")
         h = load_io(args.heldout, time=args.time, input=args.input, output=args.output)
         held = (h.t_s, h.u, h.y)
+        logs.append(h)
+    for d in logs:
+        # as identify refuses it: a constant input excites nothing, and every "effect" would be a fit to noise
+        if np.ptp(d.u) <= 1e-12 * max(1.0, float(np.max(np.abs(d.u)))):
+            raise BadInputError(f"{d.source}: {d.input_name} is constant ({d.u[0]:.6g}): no excitation to diagnose from")
+        for note in d.notes:
+            print(f"note ({d.source.name}): {note}")
     units = _units(data)
     opts = DiagnoseOptions(max_effects=args.max_effects, identify=args.identify, target_rate_hz=args.rate,
                            progress=say)

@@ -2,7 +2,7 @@
 
 :func:`load_io` returns an :class:`IOData`: input ``u`` and output ``y`` on one common
 time base ``t_s`` (float seconds), checked (finite, strictly increasing time, enough
-samples), plus the experiment's segments when the log has ``ExperimentMarker``
+samples, no gap in the time stamps longer than :data:`MAX_FILL_SAMPLES` samples), plus the experiment's segments when the log has ``ExperimentMarker``
 messages. The format is chosen by the file's suffix.
 
 - ``.mcap``: ``input``/``output`` are ``/topic.field`` (default the plant's batched
@@ -31,7 +31,7 @@ from hasel.io.csvload import Table, first_value, read_csv_table, read_mat_table
 from hasel.io.loader import MarkerSegment, Segment, load_signals_and_markers, marker_segments
 
 __all__ = ["IOData", "load_io", "DEFAULT_MCAP_INPUT", "DEFAULT_MCAP_OUTPUT", "DEFAULT_TIME", "DEFAULT_INPUT",
-           "DEFAULT_OUTPUT", "MIN_SAMPLES"]
+           "DEFAULT_OUTPUT", "MIN_SAMPLES", "MAX_FILL_SAMPLES"]
 
 DEFAULT_MCAP_INPUT = "/plant/batch.voltage_kv"
 DEFAULT_MCAP_OUTPUT = "/plant/batch.stroke_mm"
@@ -39,6 +39,8 @@ DEFAULT_TIME = "t_s"
 DEFAULT_INPUT = "voltage_kv"
 DEFAULT_OUTPUT = "stroke_mm"
 MIN_SAMPLES = 10
+#: Longest run of missing samples (a gap in the time stamps) filled by interpolation; longer ones are refused.
+MAX_FILL_SAMPLES = 5
 _TABLE_SUFFIXES = {".csv", ".txt", ".tsv", ".dat"}
 
 
@@ -121,7 +123,31 @@ def _validate(t: np.ndarray, u: np.ndarray, y: np.ndarray, names: tuple[str, str
         i = int(np.argmax(dt <= 0)) + 1
         where = f"sample {i}" + (f" (line {i + row_offset})" if row_offset else "")
         raise DataFileError(f"{source}: time {names[0]} is not strictly increasing at {where}: "
-                            f"{t[i - 1]!r} then {t[i]!r} s")
+                            f"{t[i - 1]:.9g} then {t[i]:.9g} s")
+
+
+def _gaps(t: np.ndarray, source: Path) -> str | None:
+    """A note on the short gaps in ``t`` (s) that the analyses fill; a long one is refused.
+
+    A gap is a step over 1.5 median steps. Up to :data:`MAX_FILL_SAMPLES` missing samples
+    are filled later by linear interpolation onto the uniform grid (a dropped sample or
+    two changes no estimate); a longer gap would be a ramp the system never saw, fitted
+    as if it had, so it stops the analysis with where it is and what to do.
+    """
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    missing = np.rint(dt / step).astype(np.int64) - 1
+    gap = dt > 1.5 * step
+    if not gap.any():
+        return None
+    worst = int(np.argmax(np.where(gap, missing, -1)))
+    if missing[worst] > MAX_FILL_SAMPLES:
+        raise DataFileError(f"{source}: {int(gap.sum())} gap(s) in the time stamps, the longest {dt[worst]:.6g} s "
+                            f"({int(missing[worst])} samples of {step:.6g} s missing) after t = {t[worst]:.9g} s; "
+                            f"the analyses need continuous samples: split the log at the gap and analyse the parts "
+                            f"(one may be --heldout)")
+    return (f"{int(gap.sum())} short gap(s) in the time stamps (at most {int(missing[worst])} missing sample(s) of "
+            f"{step:.6g} s, {int(missing[gap].sum())} in all) filled by linear interpolation")
 
 
 def _distinct(in_name: str, out_name: str, source: object) -> None:
@@ -156,6 +182,7 @@ def _from_table(table: Table, time: str | None, input: str | None, output: str |
         raise BadInputError(f"{table.source}: no time {table.label} {tspec!r}; {table.describe()}; "
                             "give --time NAME, or --time fs=RATE_HZ / dt=PERIOD_S for uniform sampling")
     _validate(t, u, y, (t_name, in_name, out_name), table.source, min_samples, row_offset)
+    notes += [n for n in (_gaps(t, table.source),) if n]
     return IOData(t.astype(float), u.astype(float), y.astype(float), in_name, out_name, [], table.source,
                   tuple(notes))
 
@@ -196,6 +223,7 @@ def _from_mcap(path: Path, time: str | None, input: str | None, output: str | No
         notes.append(f"{in_spec} ({len(si)} samples, {rate_in:.4g} Hz) linearly interpolated onto the "
                      f"{t.size} sample times of {out_spec}")
     _validate(t, u, y, ("time", in_spec, out_spec), path, min_samples)
+    notes += [n for n in (_gaps(t, path),) if n]
     msegs = tuple(marker_segments(markers, float(so.t_s[-1]) if so.t_s.size else None))
     return IOData(t, u, y, in_spec, out_spec, [m.as_segment() for m in msegs], path, tuple(notes), msegs)
 
@@ -227,7 +255,8 @@ def load_io(path: str | os.PathLike[str], *, time: str | None = None, input: str
     BadInputError
         Unknown column, variable, topic or field (the message lists what exists).
     DataFileError
-        Unreadable or damaged file; NaN/inf values; time not strictly increasing; too
+        Unreadable or damaged file; NaN/inf values; time not strictly increasing; a gap of more than
+        MAX_FILL_SAMPLES missing samples; too
         few samples.
     """
     p = Path(path)
