@@ -270,6 +270,16 @@ def vp_fit(segments: Sequence[Segment], rate_hz: float, *, span_s: float, f_exci
         When there are no fitted samples, no order gives a model, or the arithmetic fails
         (one line saying so).
     """
+    if not (np.isfinite(rate_hz) and rate_hz > 0 and np.isfinite(span_s) and span_s > 0):
+        raise BadInputError(f"the linear fit needs a positive rate and log length, got {rate_hz} Hz and {span_s} s")
+    if not (np.isfinite(shift) and -1.0 <= shift <= 1.0):
+        raise BadInputError(f"the output sampling offset must be within one sample, got {shift}")
+    for i, (u, y, m) in enumerate(segments):
+        if not (np.ndim(u) == np.ndim(y) == np.ndim(m) == 1 and np.size(u) == np.size(y) == np.size(m) > 0):
+            raise BadInputError(f"segment {i} of the linear fit: input, output and mask must be 1-D arrays of one "
+                                f"length, got shapes {np.shape(u)}, {np.shape(y)}, {np.shape(m)}")
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(np.asarray(y)[np.asarray(m, bool)]))):
+            raise BadInputError(f"segment {i} of the linear fit has non-finite samples")
     try:
         return _vp_fit(segments, rate_hz, span_s, f_excited_hz, shift, max_order, orders, init_poles, warm_only)
     except (np.linalg.LinAlgError, ValueError) as err:
@@ -282,6 +292,9 @@ def vp_fit(segments: Sequence[Segment], rate_hz: float, *, span_s: float, f_exci
 def _vp_fit(segments, rate_hz, span_s, f_excited_hz, shift, max_order, orders, init_poles, warm_only):
     prob = _Problem(segments, rate_hz, shift)
     y = prob.y_fit
+    spread = float(np.linalg.norm(y - y.mean()))
+    if not spread > 0:
+        raise BadInputError("the log's output does not vary on the training samples: no linear model can be fitted")
     fits = {}  # nrmse here is with the best offset (the model's own scale of error)
     for n in (orders or range(1, max_order + 1)):
         try:
@@ -291,14 +304,12 @@ def _vp_fit(segments, rate_hz, span_s, f_excited_hz, shift, max_order, orders, i
             continue
         if not np.isfinite(sse):
             continue
-        fits[n] = (num, den, float(np.sqrt(sse) / np.linalg.norm(y - y.mean())))
+        fits[n] = (num, den, float(np.sqrt(sse) / spread))
     if not fits:
         raise BadInputError("no linear model could be fitted to the log (try a longer log or a richer "
                             "excitation, or give a nominal model)")
     best = min(f[2] for f in fits.values())
     order = min(n for n, f in fits.items() if f[2] <= 1.03 * best + 1e-12)
     num, den, e = fits[order]
-    if not np.isfinite(e):
-        raise BadInputError("the log's output does not vary: no linear model can be fitted to it")
     return num, den, {"order": order, "nrmse_train": e, "orders": {n: f[2] for n, f in fits.items()},
                       "method": "internal output-error fit"}
