@@ -30,7 +30,9 @@ reported on its own.
 The simulation is the sum of first- and second-order sections in parallel (the
 partial fractions of ``G``), each discretised by its exact ZOH formula: fast enough
 to evaluate hundreds of times on 10^5 samples, well conditioned for lightly damped
-poles.
+poles. The same sections, one per mode (:func:`modal_basis`), and the ARX regression
+of :func:`arx_start` (:func:`arx_lstsq`) serve the variable-projection mode of the fit
+(:mod:`hasel.ident.varpro`).
 """
 from __future__ import annotations
 
@@ -190,7 +192,8 @@ def modal_basis(poles: np.ndarray, u: np.ndarray, rate_hz: float, *, shift: floa
                      (_pole_sections(pair, np.array([-0.5j, 0.5j]), dt)[0], rest.imag)]
         # the sections of one mode share their denominator: its recursion runs once, each
         # section's numerator (b0 = 0, b1, b2) is then two taps of it
-        w = signal.lfilter([1.0], parts[0][0][3:] if p.imag != 0 else parts[0][0][3:5], du)
+        den = parts[0][0][3:] if p.imag != 0 else parts[0][0][3:5]
+        w = signal.lfilter([1.0], den, du)
         w1 = np.concatenate([[0.0], w[:-1]])
         w2 = np.concatenate([[0.0, 0.0], w[:-2]])
         for sec, level in parts:

@@ -29,10 +29,10 @@ from hasel.errors import BadInputError
 from hasel.ident.tffit import TFModel
 from hasel.ident.timefit import arx_lstsq, modal_basis, simulate_zoh
 
-__all__ = ["Segment", "vp_fit"]
+__all__ = ["Stretch", "vp_fit"]
 
 #: One stretch of a log: input, output (their own units, one rate) and the samples fitted (bool).
-Segment = tuple[np.ndarray, np.ndarray, np.ndarray]
+Stretch = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def _poles_from_theta(th: np.ndarray, n_real: int, w_lo: float, w_hi: float) -> np.ndarray:
@@ -59,7 +59,7 @@ def _theta_from_poles(p: np.ndarray, w_lo: float) -> tuple[np.ndarray, int]:
     return np.asarray(th, float), real.size
 
 
-def _arx_poles(segments: Sequence[Segment], n: int, rate_hz: float) -> np.ndarray:
+def _arx_poles(segments: Sequence[Stretch], n: int, rate_hz: float) -> np.ndarray:
     """``n`` stable continuous poles (rad/s) from an ARX model of the mean-removed segments.
 
     Poles on or outside the unit circle are pulled inside, a negative real z (no continuous
@@ -88,7 +88,7 @@ def _modal_poles(poles: np.ndarray) -> np.ndarray:
 class _Problem:
     """The segments' fitted samples, with each segment's input minus its first sample kept for the basis."""
 
-    def __init__(self, segments: Sequence[Segment], rate_hz: float, shift: float):
+    def __init__(self, segments: Sequence[Stretch], rate_hz: float, shift: float):
         self.segments = [(np.asarray(u, float), np.asarray(y, float), np.asarray(m, bool)) for u, y, m in segments
                          if np.any(m)]
         self.rate_hz, self.shift = float(rate_hz), float(shift)
@@ -173,6 +173,7 @@ def _rhp_zeros(num: np.ndarray) -> int:
 
 def _fit_order(prob: _Problem, n: int, span_s: float, f_excited_hz: float, init: np.ndarray | None = None,
                warm_only: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+    """The best model of ``n`` poles from each start (Nelder-Mead over the poles), and its own SSE (inf if refused)."""
     rate_hz = prob.rate_hz
     # modes slower than a twentieth of the log are offsets or drifts, not dynamics it can identify
     w_lo = 20.0 / (span_s + 1e-9)
@@ -225,7 +226,7 @@ def _fit_order(prob: _Problem, n: int, span_s: float, f_excited_hz: float, init:
     return num, den, sse if np.isfinite(sse) else np.inf
 
 
-def vp_fit(segments: Sequence[Segment], rate_hz: float, *, span_s: float, f_excited_hz: float, shift: float = 0.0,
+def vp_fit(segments: Sequence[Stretch], rate_hz: float, *, span_s: float, f_excited_hz: float, shift: float = 0.0,
            max_order: int = 4, orders: tuple[int, ...] | None = None, init_poles: np.ndarray | None = None,
            warm_only: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """Identify a stable, strictly proper, minimum-phase continuous model ``num/den`` by variable projection.
