@@ -64,18 +64,24 @@ def _pole_sections(poles: np.ndarray, residues: np.ndarray, dt: float) -> list[n
         if used[i]:
             continue
         used[i] = True
-        a = np.exp(p * dt)
-        b = (a - 1.0) / p if abs(p) > 1e-300 else dt
         if abs(p.imag) <= 1e-9 * max(abs(p), 1e-12):
-            secs.append(np.array([0.0, float(np.real(r * b)), 0.0, 1.0, -float(np.real(a)), 0.0]))
+            secs.append(_mode_section(p, r, dt, True))
             continue
         # its conjugate: mark it used (the pair is one real section)
         j = np.argmin(np.where(used, np.inf, np.abs(poles - np.conj(p))))
         used[j] = True
-        rb = r * b
-        secs.append(np.array([0.0, 2.0 * rb.real, -2.0 * float(np.real(rb * np.conj(a))), 1.0,
-                              -2.0 * a.real, float(abs(a) ** 2)]))
+        secs.append(_mode_section(p, r, dt, False))
     return secs
+
+
+def _mode_section(p: complex, r: complex, dt: float, real: bool) -> np.ndarray:
+    """The section ``[b0, b1, b2, 1, a1, a2]`` of ``r / (s - p)``, with its conjugate unless ``real`` (exact ZOH, step dt s)."""
+    a = np.exp(p * dt)
+    b = (a - 1.0) / p if abs(p) > 1e-300 else dt
+    if real:
+        return np.array([0.0, float(np.real(r * b)), 0.0, 1.0, -float(np.real(a)), 0.0])
+    rb = r * b
+    return np.array([0.0, 2.0 * rb.real, -2.0 * float(np.real(rb * np.conj(a))), 1.0, -2.0 * a.real, float(abs(a) ** 2)])
 
 
 def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1,
@@ -179,26 +185,30 @@ def modal_basis(poles: np.ndarray, u: np.ndarray, rate_hz: float, *, shift: floa
     """
     dt = 1.0 / rate_hz
     u0 = float(u[0])
-    # one sample more, so that the interpolation at the last sample has its right neighbour
-    du = np.concatenate([u, u[-1:]]) - u0
+    # two zeros before (the taps below read the recursion one and two samples late) and one sample
+    # more (the interpolation at the last sample has its right neighbour)
+    du = np.empty(u.size + 3)
+    du[:2] = 0.0
+    du[2:-1] = u
+    du[-1] = u[-1]
+    du[2:] -= u0
     cols = []
     for p in np.asarray(poles, complex):
         rest = -u0 / p   # the mode at rest with u[0]
         if p.imag == 0:
-            parts = [(_pole_sections(np.array([p]), np.array([1.0 + 0j]), dt)[0], rest.real)]
+            parts = [(_mode_section(p, 1.0, dt, True), rest.real)]
         else:
-            pair = np.array([p, np.conj(p)])
-            parts = [(_pole_sections(pair, np.array([0.5, 0.5], complex), dt)[0], rest.real),
-                     (_pole_sections(pair, np.array([-0.5j, 0.5j]), dt)[0], rest.imag)]
-        # the sections of one mode share their denominator: its recursion runs once, each
-        # section's numerator (b0 = 0, b1, b2) is then two taps of it
-        den = parts[0][0][3:] if p.imag != 0 else parts[0][0][3:5]
-        w = signal.lfilter([1.0], den, du)
-        w1 = np.concatenate([[0.0], w[:-1]])
-        w2 = np.concatenate([[0.0, 0.0], w[:-2]])
+            # the residues of the real and of the imaginary part of 1/(s - p)
+            parts = [(_mode_section(p, 0.5, dt, False), rest.real), (_mode_section(p, -0.5j, dt, False), rest.imag)]
+        # the sections of one mode share their denominator: its recursion runs once (and is read
+        # at the shifted times once: the reading is linear), each section's numerator (b0 = 0,
+        # b1, b2) is then two taps of it
+        w = signal.lfilter([1.0], parts[0][0][3:4 + len(parts)], du)
+        if shift != 0.0:
+            w = _at_shift(w, shift)
+        w1, w2 = w[1:-2], w[:-3]
         for sec, level in parts:
-            col = sec[1] * w1 + level if sec[2] == 0.0 else sec[1] * w1 + sec[2] * w2 + level
-            cols.append(_at_shift(col, shift)[:-1])
+            cols.append(sec[1] * w1 + level if len(parts) == 1 else sec[1] * w1 + sec[2] * w2 + level)
     return cols
 
 

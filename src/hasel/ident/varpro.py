@@ -150,8 +150,13 @@ def _numerator(mp: np.ndarray, c: np.ndarray) -> np.ndarray:
     num = np.zeros(n, complex)
     i = 0
     for k, p in enumerate(mp):
-        others = np.delete(full, k) if p.imag == 0 else np.delete(full, [k, mp.size + int(np.sum(mp[:k].imag > 0))])
-        rest = np.poly(others) if others.size else np.array([1.0])
+        drop = {k} if p.imag == 0 else {k, mp.size + int(np.sum(mp[:k].imag > 0))}
+        # the product of the other factors (s - q), as np.poly forms it, without its checks
+        rest = np.ones(1, complex)
+        for j, q in enumerate(full):
+            if j not in drop:
+                rest = np.convolve(rest, np.array([1.0, -q]))
+        rest = rest.real   # the other factors are real or in conjugate pairs
         if p.imag == 0:
             term = c[i] * rest
             i += 1
