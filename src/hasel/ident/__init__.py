@@ -13,7 +13,9 @@ work; kV -> mm for the actuator.
 - building blocks: :mod:`~hasel.ident.segments`, :mod:`~hasel.ident.freqresp`,
   :mod:`~hasel.ident.staticmap`, :mod:`~hasel.ident.dependence`,
   :mod:`~hasel.ident.tffit`, :mod:`~hasel.ident.timefit`, :mod:`~hasel.ident.validation`,
-  :mod:`~hasel.ident.checks`;
+  :mod:`~hasel.ident.checks`; :mod:`~hasel.ident.varpro`, the output-error fit by variable
+  projection on timefit's ARX regression and modal simulation (no start model needed; the
+  diagnosis uses it when it is given no nominal model);
 - figures and report: :mod:`hasel.ident.report`; the command: :mod:`hasel.ident.cli`.
 """
 from hasel.ident.checks import ModelCheck, check_model, check_model_json

@@ -30,7 +30,9 @@ reported on its own.
 The simulation is the sum of first- and second-order sections in parallel (the
 partial fractions of ``G``), each discretised by its exact ZOH formula: fast enough
 to evaluate hundreds of times on 10^5 samples, well conditioned for lightly damped
-poles.
+poles. The same sections, one per mode (:func:`modal_basis`), and the ARX regression
+of :func:`arx_start` (:func:`arx_lstsq`) serve the variable-projection mode of the fit
+(:mod:`hasel.ident.varpro`).
 """
 from __future__ import annotations
 
@@ -45,7 +47,7 @@ from hasel.errors import BadInputError
 from hasel.ident.tffit import TFModel
 from hasel.lti import zoh_sos
 
-__all__ = ["simulate_zoh", "Pieces", "OEResult", "oe_fit", "HOLDS"]
+__all__ = ["simulate_zoh", "modal_basis", "Pieces", "OEResult", "oe_fit", "arx_start", "arx_lstsq", "HOLDS"]
 
 #: Accepted sampling conventions of the input.
 HOLDS = ("zoh", "centred")
@@ -62,18 +64,24 @@ def _pole_sections(poles: np.ndarray, residues: np.ndarray, dt: float) -> list[n
         if used[i]:
             continue
         used[i] = True
-        a = np.exp(p * dt)
-        b = (a - 1.0) / p if abs(p) > 1e-300 else dt
         if abs(p.imag) <= 1e-9 * max(abs(p), 1e-12):
-            secs.append(np.array([0.0, float(np.real(r * b)), 0.0, 1.0, -float(np.real(a)), 0.0]))
+            secs.append(_mode_section(p, r, dt, True))
             continue
         # its conjugate: mark it used (the pair is one real section)
         j = np.argmin(np.where(used, np.inf, np.abs(poles - np.conj(p))))
         used[j] = True
-        rb = r * b
-        secs.append(np.array([0.0, 2.0 * rb.real, -2.0 * float(np.real(rb * np.conj(a))), 1.0,
-                              -2.0 * a.real, float(abs(a) ** 2)]))
+        secs.append(_mode_section(p, r, dt, False))
     return secs
+
+
+def _mode_section(p: complex, r: complex, dt: float, real: bool) -> np.ndarray:
+    """The section ``[b0, b1, b2, 1, a1, a2]`` of ``r / (s - p)``, with its conjugate unless ``real`` (exact ZOH, step dt s)."""
+    a = np.exp(p * dt)
+    b = (a - 1.0) / p if abs(p) > 1e-300 else dt
+    if real:
+        return np.array([0.0, float(np.real(r * b)), 0.0, 1.0, -float(np.real(a)), 0.0])
+    rb = r * b
+    return np.array([0.0, 2.0 * rb.real, -2.0 * float(np.real(rb * np.conj(a))), 1.0, -2.0 * a.real, float(abs(a) ** 2)])
 
 
 def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1,
@@ -112,7 +120,11 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
         x = np.concatenate([np.zeros(min(lag, x.size)), x[: max(x.size - lag, 0)]])
     y = _sim_modal(np.asarray(model.num, float), np.asarray(model.den, float), x, 1.0 / rate_hz)
     # where the data's sample sits between two simulated samples, in samples
-    frac = (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0) + float(shift)
+    return _at_shift(y, (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0) + float(shift))
+
+
+def _at_shift(y: np.ndarray, frac: float) -> np.ndarray:
+    """``y`` read ``frac`` samples later, ``out[k] = y(k + frac)``: linear interpolation, the end samples held."""
     whole = int(np.floor(frac))
     frac -= whole
     if whole > 0:
@@ -146,6 +158,58 @@ def _sim_modal(num: np.ndarray, den: np.ndarray, u: np.ndarray, dt: float) -> np
     for sec in _pole_sections(poles, res, dt):
         y = y + signal.sosfilt(sec[None, :], u)
     return y
+
+
+def modal_basis(poles: np.ndarray, u: np.ndarray, rate_hz: float, *, shift: float = 0.0) -> list[np.ndarray]:
+    """Responses to ``u`` of the modes of ``poles``: every model with these poles is a combination of them.
+
+    One column per real pole (the response of ``1/(s - p)``) and two per pole of positive
+    imaginary part (the responses of the real and of the imaginary part of ``1/(s - p)``,
+    its conjugate implied), each the exact ZOH section of :func:`simulate_zoh`'s
+    simulation (:func:`_pole_sections`), started at rest with ``u[0]`` and read ``shift``
+    samples (``-1 .. 1``) into each interval, interpolated as :func:`simulate_zoh` does.
+
+    Parameters
+    ----------
+    poles : ndarray of complex
+        Real poles (imaginary part exactly 0) and one pole of each conjugate pair, rad/s.
+    u : ndarray, shape (n,)
+        Input, input unit, at ``rate_hz`` (Hz).
+    shift : float
+        Where the output samples sit, samples of ``u`` (as :func:`simulate_zoh`'s ``shift``).
+
+    Returns
+    -------
+    list of ndarray, shape (n,)
+        The columns, output unit per input unit times s.
+    """
+    dt = 1.0 / rate_hz
+    u0 = float(u[0])
+    # two zeros before (the taps below read the recursion one and two samples late) and one sample
+    # more (the interpolation at the last sample has its right neighbour)
+    du = np.empty(u.size + 3)
+    du[:2] = 0.0
+    du[2:-1] = u
+    du[-1] = u[-1]
+    du[2:] -= u0
+    cols = []
+    for p in np.asarray(poles, complex):
+        rest = -u0 / p   # the mode at rest with u[0]
+        if p.imag == 0:
+            parts = [(_mode_section(p, 1.0, dt, True), rest.real)]
+        else:
+            # the residues of the real and of the imaginary part of 1/(s - p)
+            parts = [(_mode_section(p, 0.5, dt, False), rest.real), (_mode_section(p, -0.5j, dt, False), rest.imag)]
+        # the sections of one mode share their denominator: its recursion runs once (and is read
+        # at the shifted times once: the reading is linear), each section's numerator (b0 = 0,
+        # b1, b2) is then two taps of it
+        w = signal.lfilter([1.0], parts[0][0][3:4 + len(parts)], du)
+        if shift != 0.0:
+            w = _at_shift(w, shift)
+        w1, w2 = w[1:-2], w[:-3]
+        for sec, level in parts:
+            cols.append(sec[1] * w1 + level if len(parts) == 1 else sec[1] * w1 + sec[2] * w2 + level)
+    return cols
 
 
 @dataclass(frozen=True)
@@ -491,6 +555,35 @@ def _nrmse(y: np.ndarray, yh: np.ndarray, pieces: Pieces, mask: np.ndarray) -> f
     return float(np.sqrt(num / den)) if den > 0 else float("nan")
 
 
+def arx_lstsq(segments: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int, *, constant: bool = False,
+              min_rows: int = 1) -> np.ndarray | None:
+    """Least-squares ARX coefficients over the masked samples of one or more segments.
+
+    The model ``y[k] = -sum a_i y[k-i] + sum b_i u[k-i] (+ c)``, ``i = 1..n``, is linear in
+    its parameters; its rows are the samples ``k >= n`` of each segment ``(u, y, mask)``
+    where ``mask[k]`` is true (input and output in their own units, one rate). The
+    columns are scaled to unit norm for the solve.
+
+    Returns ``[a_1..a_n, b_1..b_n]`` (and ``c``, output unit, with ``constant``), or None
+    with fewer than ``min_rows`` rows.
+    """
+    blocks, rhs = [], []
+    for u, y, mask in segments:
+        k = np.arange(n, y.size)
+        k = k[mask[k]]
+        cols = [-y[k - i] for i in range(1, n + 1)] + [u[k - i] for i in range(1, n + 1)]
+        if constant:
+            cols.append(np.ones(k.size))
+        blocks.append(np.column_stack(cols))
+        rhs.append(y[k])
+    if not blocks or sum(b.shape[0] for b in blocks) < max(min_rows, 1):
+        return None
+    X, b = (blocks[0], rhs[0]) if len(blocks) == 1 else (np.vstack(blocks), np.concatenate(rhs))
+    scale = np.linalg.norm(X, axis=0)
+    scale[scale == 0] = 1.0
+    return np.linalg.lstsq(X / scale, b, rcond=None)[0] / scale
+
+
 def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pieces) -> TFModel | None:
     """A continuous start of ``n_p`` poles from a least-squares ARX fit on the estimation samples.
 
@@ -503,15 +596,9 @@ def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pi
     from scipy import linalg
 
     n = n_p
-    k = np.arange(n, y.size)
-    k = k[pieces.estimate[k]]
-    if k.size < 4 * (2 * n + 1):
+    theta = arx_lstsq([(u, y, pieces.estimate)], n, constant=True, min_rows=4 * (2 * n + 1))
+    if theta is None:
         return None
-    cols = [-y[k - i] for i in range(1, n + 1)] + [u[k - i] for i in range(1, n + 1)] + [np.ones(k.size)]
-    X = np.column_stack(cols)
-    scale = np.linalg.norm(X, axis=0)
-    scale[scale == 0] = 1.0
-    theta = np.linalg.lstsq(X / scale, y[k], rcond=None)[0] / scale
     a = np.concatenate([[1.0], theta[:n]])
     b = np.concatenate([[0.0], theta[n:2 * n]])
     try:
