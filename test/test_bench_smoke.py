@@ -57,7 +57,8 @@ def test_quick_bench_writes_a_table_and_finite_json(tmp_path, capfd):
     unclipped = [sum(g * num[-1] / den[-1] * (v + 1.0) < full_scale_mm for v in range(2, 8)) for g in CAMPAIGN_GAINS]
     assert [m["operating_points"] for m in r5["identify_vs_load"]["models"]] == unclipped
     fl = res["floor"]  # the empty ring and one plant step: nothing with this graph's work can beat it
-    assert fl["n_nodes"] == 5 and fl["round_cpu_us"] > 0 and fl["delivery_us"] > 0
+    # delivery_us is a difference of two wall times (clipped at 0 under load): a ratio for make bench, not a test
+    assert fl["n_nodes"] == 5 and fl["round_cpu_us"] > 0 and fl["hop_us"] > 0
     ev = g["events"]
     assert ev["speed"] < fl["speed_ceiling"]
     assert any(r["figure"].startswith("1 ceiling") for r in doc["table"])
