@@ -8,7 +8,7 @@ from typing import Any
 
 from hasel.errors import BadInputError
 
-__all__ = ["finite", "positive", "in_range", "seed", "text_file", "SEED_MAX"]
+__all__ = ["finite", "positive", "in_range", "seed", "text_file", "excited", "SEED_MAX"]
 
 SEED_MAX = 2**31 - 1  # the nodes' seed parameters take a signed 32-bit integer
 
@@ -75,3 +75,17 @@ def text_file(name: str, path: str, limit_bytes: int = 64 << 20) -> Path:
         kind = "an MCAP log" if data.startswith(b"\x89MCAP") else "binary"
         raise BadInputError(f"{name} {p} is not a text file ({kind}: byte {err.start} is not UTF-8)") from err
     return p
+
+
+
+def excited(name: str, samples: Any, purpose: str) -> None:
+    """Raise :class:`BadInputError` if the input ``samples`` (any unit) never change: nothing to ``purpose`` from.
+
+    Constant means a spread within 1e-12 of the larger of 1 and the largest magnitude
+    (a wiggle of float rounding excites nothing either).
+    """
+    import numpy as np  # here, not at the top: the `hasel` command imports this module at start-up
+
+    x = np.asarray(samples, float)
+    if np.ptp(x) <= 1e-12 * max(1.0, float(np.max(np.abs(x)))):
+        raise BadInputError(f"{name} is constant ({x[0]:.6g}): no excitation to {purpose} from")

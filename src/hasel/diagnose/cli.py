@@ -150,6 +150,7 @@ def _run(args: argparse.Namespace, say: Progress) -> int:
     """``hasel diagnose`` proper, telling its progress to ``say``."""
     from hasel.diagnose.core import DiagnoseOptions, DiagnosisFailed, diagnose
     from hasel.io import load_io
+    from hasel.validate import excited
 
     if args.max_effects < 0:
         raise BadInputError(f"--max-effects must be >= 0, got {args.max_effects}")
@@ -167,8 +168,7 @@ def _run(args: argparse.Namespace, say: Progress) -> int:
         logs.append(h)
     for d in logs:
         # as identify refuses it: a constant input excites nothing, and every "effect" would be a fit to noise
-        if np.ptp(d.u) <= 1e-12 * max(1.0, float(np.max(np.abs(d.u)))):
-            raise BadInputError(f"{d.source}: {d.input_name} is constant ({d.u[0]:.6g}): no excitation to diagnose from")
+        excited(f"{d.source}: {d.input_name}", d.u, "diagnose")
         for note in d.notes:
             print(f"note ({d.source.name}): {note}")
     units = _units(data)

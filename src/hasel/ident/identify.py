@@ -57,6 +57,7 @@ from hasel.ident.checks import SPREAD_FLOOR, ModelCheck, check_model, inband_err
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
 from hasel.ident.timefit import arx_start, interleaved, oe_fit, response_uncertainty
 from hasel.ident.validation import compare_fit
+from hasel.validate import excited
 from hasel.signals import uniform_grid
 
 __all__ = ["IdentOptions", "OperatingPoint", "Validation", "IdentResult", "identify", "unit_from_name",
@@ -475,8 +476,7 @@ def check_signals(t_s: Any, u: Any, y: Any, *, input_name: str = "input",
         i = int(np.argmax(dt <= 0))
         raise BadInputError(f"time is not strictly increasing at sample {i + 1} "
                             f"(t = {t[i]:.9g} s then {t[i + 1]:.9g} s)")
-    if np.ptp(uu) <= 1e-12 * max(1.0, float(np.max(np.abs(uu)))):
-        raise BadInputError(f"{input_name} is constant ({uu[0]:.6g}): no excitation to identify from")
+    excited(input_name, uu, "identify")
     return t, uu, yy
 
 
