@@ -62,8 +62,18 @@ class Probe:
         end = time.monotonic() + timeout
         while not cond():
             if time.monotonic() > end:
-                raise AssertionError(f"timed out waiting for {what}")
+                raise AssertionError(f"timed out waiting for {what}; {self.describe()}")
             self.ex.spin_once(timeout_sec=0.01)
+
+    def describe(self) -> str:
+        """What the probe has seen and knows of the graph (for a timeout's message)."""
+        n = self.node
+        pubs = {t: n.count_publishers(t) for t in ("/diagnostics", "/controller/state", "/amp/applied")}
+        last = self.states[-1] if self.states else None
+        return (f"publishers seen {pubs}; diagnostics {self.diags[-5:]}; {len(self.states)} states, last "
+                f"stale={getattr(last, 'input_stale', None)} stamp={from_stamp(last.header.stamp) if last else None}; "
+                f"{len(self.applied)} applied, last {self.applied[-1] if self.applied else None}; "
+                f"probe clock {time.time():.3f}")
 
     def close(self) -> None:
         self.ex.shutdown()
@@ -113,7 +123,9 @@ def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
 @pytest.mark.parametrize("victim", ["driver", "plant"])
 def test_losing_the_sensor_path_is_noticed_and_ends_at_zero_kv(loop, victim):
     procs, probe = loop
-    probe.wait(lambda: running(probe), 60, "the loop to run")
+    # the probe must be matched by the controller before the kill: a fault said to no reader
+    # is lost (discovery on a loaded machine took > 20 s once), though it is restated each second
+    probe.wait(lambda: running(probe) and probe.states, 60, "the loop to run and the controller's state")
     procs[victim].send_signal(signal.SIGKILL)
     procs[victim].wait()
     probe.wait(lambda: any("stale" in d for d in probe.diags), 10, "the controller to report stale input")

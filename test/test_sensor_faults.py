@@ -79,6 +79,21 @@ def test_dropout_zero_kv_within_three_periods_error_and_bumpless_resume():
     assert np.max(np.abs(s["true_stroke_mm"][s["t_s"] > 1.1] - 4.0)) < 0.1  # control resumed
 
 
+def test_a_long_dropout_is_restated_each_second_and_cleared_once():
+    # a monitor matched after the transition must still see the fault (diagnostic_updater's habit)
+    s, applied, states, diags = run_with(lambda t, z: None if 0.6 <= t < 2.9 else z, 3.2)
+    error = int.from_bytes(DiagnosticStatus.ERROR, "little")
+    errs = [t for t, level, msg in diags if level == error and "stale" in msg]
+    assert len(errs) == 3, errs
+    assert 0.6 <= errs[0] <= 0.62
+    np.testing.assert_allclose(np.diff(errs), 1.0, atol=0.0051)  # said again each second, to a tick
+    ok = [t for t, level, msg in diags if level == 0 and "feedback ok" in msg]
+    assert len(ok) == 1 and 2.9 <= ok[0] <= 2.92  # the gate takes a few samples to trust a new level
+    # the transitions alone carry a ControllerState: one stale, one back
+    marks = [st.input_stale for st in states if math.isnan(st.measured_mm)]
+    assert marks == [True, False]
+
+
 def test_stuck_sensor_is_detected_and_ends_in_zero_kv():
     frozen = {}
 

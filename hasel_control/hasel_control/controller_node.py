@@ -16,12 +16,13 @@ Faults (see FAULTS.md), all decided by :class:`hasel.controller.ControllerCore`:
 sample that fails the plausibility gate is counted and skipped, the last command held
 for that tick; no valid sample for ``stale_periods`` periods, or a stuck sensor,
 holds the integrator, sends no command (the amplifier's watchdog then drives 0 kV
-within three periods) and reports a diagnostic ERROR; when valid, moving samples
-return, control resumes from the held integrator without a derivative kick. This
-node only translates: message -> one core call -> publish.
+within three periods) and reports a diagnostic ERROR, said again each second while it
+lasts; when valid, moving samples return, control resumes from the held integrator
+without a derivative kick. This node only translates: message -> one core call -> publish.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -32,6 +33,7 @@ from hasel import paper
 from hasel.controller import ControllerCore, ControlStep
 from hasel.faults import OK, Notice, PlausibilityGate, StuckDetector
 from hasel.pid import ANTI_WINDUP, DualModeConfig, DualModePid, PidGains
+from hasel.timeconv import ns_to_s, s_to_ns
 from hasel_ros.rosutil import (Deadline, declare, diagnostic, run_node, stamp_ns, to_stamp, topic_qos,
                                validate_with)
 from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
@@ -39,6 +41,10 @@ from hasel_msgs.msg import ControllerState, Reference, Stroke, VoltageCommand
 __all__ = ["PidControllerNode", "main", "FEEDBACK_TOPICS"]
 
 FEEDBACK_TOPICS = {"laser": "laser/stroke", "strain": "strain/stroke_filtered"}
+#: While the feedback stays stale its ERROR diagnostic is said again this often (s), as
+#: diagnostic_updater does: a monitor that joins, or is matched by discovery, after the
+#: transition still sees the fault.
+RESTATE_S = 1.0
 _GAIN_PARAMS = ("kp_plus", "ki_plus", "kd_plus", "kp_minus", "ki_minus", "kd_minus")
 
 
@@ -81,6 +87,8 @@ class PidControllerNode(Node):
         self.create_subscription(Reference, "reference", self.on_reference, topic_qos("/reference"))
         # staleness check on the ROS (maybe simulated) clock; runs only when feedback is late
         self.deadline = Deadline(self, self.stale_periods * period, period, self.on_watch)
+        self._fault: Notice | None = None  # the stale notice in force, restated every RESTATE_S
+        self._fault_said_ns = 0
 
     def _config(self, g: dict, period: float, v_min: float, v_max: float, aw: str) -> DualModeConfig:
         return DualModeConfig(plus=PidGains(g["kp_plus"], g["ki_plus"], g["kd_plus"]),
@@ -123,6 +131,8 @@ class PidControllerNode(Node):
         for notice in step.notices:
             self._report(notice)
         if step.command_kv is None:
+            if self._fault is not None:  # a stuck sensor: samples come, the fault stays
+                self._restate(stamp_ns(msg.header.stamp))
             return
         cmd = self._cmd  # one message object, refilled: publish() copies it at once
         cmd.requested_kv = step.command_kv
@@ -143,14 +153,29 @@ class PidControllerNode(Node):
 
     def on_watch(self) -> None:
         """Declare the feedback stale when it is older than ``stale_periods`` periods."""
-        notice = self.core.poll(self.get_clock().now().nanoseconds)
+        now_ns = self.get_clock().now().nanoseconds
+        notice = self.core.poll(now_ns)
         if notice is not None:
             self._report(notice)
+        elif self._fault is not None:
+            self._restate(now_ns)
+
+    def _restate(self, now_ns: int) -> None:
+        """Say the stale diagnostic again (no ControllerState: those mark transitions) if
+        ``RESTATE_S`` has passed since it was last said; ``now_ns`` on the node's clock."""
+        if now_ns - self._fault_said_ns >= s_to_ns(RESTATE_S):
+            self._say(dataclasses.replace(self._fault, t_s=ns_to_s(now_ns)))
+
+    def _say(self, notice: Notice) -> None:
+        """Publish one diagnostic for ``notice`` (its time ``t_s`` in s on the node's clock)."""
+        self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, notice.t_s,
+                                         **notice.values, feedback=self.feedback))
+        self._fault_said_ns = s_to_ns(notice.t_s)
 
     def _report(self, notice: Notice) -> None:
         """A stale/ok transition: diagnostic and a ControllerState saying so."""
-        self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, notice.t_s,
-                                         **notice.values, feedback=self.feedback))
+        self._fault = None if notice.level == OK else notice
+        self._say(notice)
         core = self.core
         st = ControllerState(reference_mm=self.reference_at(notice.t_s), measured_mm=math.nan, error_mm=math.nan,
                              mode=core.pid.mode, i_term_kv=core.pid.i_kv, output_kv=0.0, input_stale=notice.level != OK,
