@@ -13,8 +13,9 @@ Clock modes (parameter ``clock_mode``):
 - ``sim``: the plant owns time. It publishes ``/clock`` and steps in lockstep: after
   publishing tick k it waits for the amplifier output stamped t_k, then integrates one
   period. The whole graph is deterministic and runs as fast as the machine allows.
-  If no output arrives within ``lockstep_timeout_s`` of wall time the plant steps
-  anyway, holding the last command as a DAC would, and after three missed periods
+  If no output arrives within ``lockstep_timeout_s`` of wall time (counted by the
+  plant's own watch, so that a stall of its process is not the amplifier's silence)
+  the plant steps anyway, holding the last command as a DAC would, and after three missed periods
   it models the MCU's own watchdog by applying 0 kV. An output of the amplifier's
   watchdog answers a tick at the instant the clock moves, ahead of that tick's
   messages still on their way through the graph; the plant lets them land (a few
@@ -104,7 +105,7 @@ class PlantNode(Node):
         self.running = False
         self.done = False
         self.sequence = 0
-        self._last_progress = time.monotonic()
+        self._progress()
         self._waiters: list[tuple[float, object]] = []
 
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", topic_qos("/clock")) \
@@ -123,7 +124,8 @@ class PlantNode(Node):
         if self.clock_mode == "wall":
             self.create_timer(period, self.on_wall_tick, clock=steady)
         else:
-            self.create_timer(min(self.lockstep_timeout_s / 2, 0.05), self.on_lockstep_watch, clock=steady)
+            self._watch_s = min(self.lockstep_timeout_s / 2, 0.05)
+            self.create_timer(self._watch_s, self.on_lockstep_watch, clock=steady)
             self._settle = self.create_timer(min(self.lockstep_timeout_s / 4, _SETTLE_S), self._on_settled,
                                              clock=steady)
             self._settle.cancel()
@@ -169,7 +171,7 @@ class PlantNode(Node):
         if self.running:
             return
         self.running = True
-        self._last_progress = time.monotonic()
+        self._progress()
         self._publish_tick()
 
     def on_applied(self, msg: VoltageCommand) -> None:
@@ -204,17 +206,32 @@ class PlantNode(Node):
         if command is not None and self.running and not self.done:
             self._advance(self.held.fresh(command))
 
+    def _progress(self) -> None:
+        """The graph moved (a step or the start): the quiet is counted again from now."""
+        self._last_watch = time.monotonic()
+        self._quiet_s = 0.0
+
     def on_lockstep_watch(self) -> None:
-        """Wall-time guard of lockstep: step anyway if the amplifier has gone quiet."""
+        """Wall-time guard of lockstep: step anyway if the amplifier has gone quiet.
+
+        The quiet (s of wall time) is counted by this watch's own calls, each gap at
+        most one watch period: when this process is stalled (descheduled on a loaded
+        machine, or a garbage collection) the amplifier's answer waits in the queue
+        behind this call, and the stall is not its silence. Without the cap a 0.2 s
+        stall made the plant step on a held command once in a loaded `make test`.
+        """
+        now = time.monotonic()
+        gap, self._last_watch = now - self._last_watch, now
+        self._quiet_s += min(gap, self._watch_s)
         if not self.running or self.done or self._watchdog_answer is not None:
             return
-        if time.monotonic() - self._last_progress < self.lockstep_timeout_s:
+        if self._quiet_s < self.lockstep_timeout_s:
             return
         self._advance(self.held.missing())
 
     def _advance(self, command_kv: float | np.ndarray) -> None:
         block = self.sim.step(command_kv)
-        self._last_progress = time.monotonic()
+        self._progress()
         if self.publish_batch and self.batch_pub.get_subscription_count():  # nobody listening: skip the work
             self._publish_batch(block)
         if self.stop_at_s >= 0 and self.now_s() >= self.stop_at_s - 1e-12:
