@@ -139,9 +139,11 @@ def _paper_chirp_200():
 def test_a_right_over_parameterised_model_is_not_refused_for_its_parameterisation():
     """The 4/5 model of a 200 Hz paper chirp is 0.2 dB / 3.1 deg off P(s); refused before (5a1ef5b) with a
     claimed +-6.3 dB / +-90 deg at 0.31 Hz: the derivatives of log G were finite steps 1e8 times a numerator
-    coefficient that the model's 45 kHz pole scales to 5e-17. Exact derivatives: a bound of hundredths of a dB."""
+    coefficient that the model's 45 kHz pole scales to 5e-17. Exact derivatives: a bound of hundredths of a dB.
+    The order is given: since h-time the free selection keeps order 2/3 with a -1.8 ms timing offset, which ties
+    with 4/5 on the held-out data (0.54 dB / 5.9 deg off, wrong yet usable: bench/tune_ident/RESULT_h-time.md)."""
     log = _paper_chirp_200()
-    r = identify(log.t_s, log.u_kv, log.y_mm, input_name="voltage_kv", output_name="stroke_mm")
+    r = identify(log.t_s, log.u_kv, log.y_mm, input_name="voltage_kv", output_name="stroke_mm", order=(4, 5))
     c = r.paper_comparison()
     assert c["max_db"] < 0.5 and c["max_deg"] < 4.0, c
     assert r.usable, r.reasons

@@ -89,9 +89,19 @@ A model is usable when all of these hold:
    5 deg tolerance's 12 % / 8.7 %, kept from check 5) was not tuned down to gain one log. The 12 left (5-20 deg near the
    band's top) agree with the data within their error bars: a sampling convention's lead
    taken into ``G``'s phase instead of the timing offset, which no comparison with these
-   data can tell apart.
+   data can tell apart: check 9 refuses those it can show;
+9. the timing offset is told from ``G``'s phase: when the held-out data did not decide
+   between the chosen order without a timing offset and the same order refitted with
+   one (:func:`hasel.ident.identify._timing_or_not`: neither criterion better nor worse,
+   the offset inside its bound), the two fits say the same of the data but not of the
+   plant. Their ``G`` (without the offsets) must agree within ``TIMING_FACTOR`` times
+   ``tol_db`` / ``tol_deg`` wherever they differ beyond their combined 95 % uncertainty
+   (the offset one of the parameters of the refitted one's covariance). A model whose
+   phase near the band's top may be a sampling convention's lead is refused with the
+   experiments that separate the two: a higher sample rate, an input of known latency,
+   or the convention given.
 
-In 6 and 7, as in 5, the tolerances are relative to the larger of ``|G|`` and a tenth
+In 6, 7 and 9, as in 5, the tolerances are relative to the larger of ``|G|`` and a tenth
 of the static gain: where the response is more than 20 dB down they widen by
 ``0.1 |G(0)| / |G|`` (an error there moves the output little).
 
@@ -137,6 +147,9 @@ SPREAD_FLOOR = 0.1
 #: Check 7 refuses when a tied rival differs by more than this many tolerances (a difference of one tolerance
 #: between two models that fit alike bounds neither's error by it; twice it, one of them is off by more).
 RIVAL_FACTOR = 2.0
+#: Check 9 refuses when the same order with the timing offset the held-out data could not refuse differs in G
+#: by more than this many tolerances (beyond both fits' combined 95 % uncertainty).
+TIMING_FACTOR = 1.0
 
 
 @dataclass(frozen=True)
@@ -469,15 +482,10 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
             q = resp(m) / G * np.exp(-2j * math.pi * f * (tau_r - timing_offset_s))
         if not np.all(np.isfinite(q)):
             continue
-        d_db, d_deg = np.abs(20 * np.log10(np.abs(q))), np.abs(np.degrees(np.angle(q)))
         # the difference of two estimates from the same data is noise while it is within their combined
         # 95 % uncertainty (each model's own standard error; a rival without one counts as exact): only a
         # difference beyond it says the tied orders disagree about the response
-        r_db = np.asarray(sd_r[0], float) if sd_r is not None else np.zeros(f.size)
-        r_deg = np.asarray(sd_r[1], float) if sd_r is not None else np.zeros(f.size)
-        u_db = SPREAD_Z * np.sqrt(c_db ** 2 + r_db ** 2)
-        u_deg = SPREAD_Z * np.sqrt(c_deg ** 2 + r_deg ** 2)
-        w = np.maximum(np.where(d_db > u_db, d_db / tol_db, 0.0), np.where(d_deg > u_deg, d_deg / tol_deg, 0.0)) / widen
+        w, d_db, d_deg, u_db, u_deg = _beyond(q, c_db, c_deg, sd_r, tol_db, tol_deg, widen)
         i = int(np.argmax(w))
         if worst is None or w[i] > worst[0]:
             worst = (float(w[i]), nz, n_p, float(d_db[i]), float(d_deg[i]), float(f[i]), score,
@@ -494,6 +502,60 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
                            "response there")
             fixes.append(f"excite more around {worst[5]:.3g} Hz (a chirp or multisine through it, repeated in whole "
                          "periods per operating point), or fix the order with --order if it is known")
+    _timing_rival(G, f, widen, c_db, c_deg, spread, tol_db, tol_deg, timing_offset_s, reasons, fixes, details)
+
+
+def _beyond(q: np.ndarray, c_db: np.ndarray, c_deg: np.ndarray, sd_r: Any, tol_db: float, tol_deg: float,
+            widen: np.ndarray) -> tuple[np.ndarray, ...]:
+    """How far two models differ beyond their combined 95 % uncertainty, in (widened) tolerances.
+
+    ``q``: the ratio of their responses; ``c_db`` / ``c_deg``: the first's standard errors (dB, deg);
+    ``sd_r``: the second's ``(sd_db, sd_deg)`` or None (exact). Returns ``(w, d_db, d_deg, u_db, u_deg)``:
+    per frequency the difference over the tolerance where it exceeds the uncertainty (else 0), the
+    differences (dB, deg) and the combined 95 % uncertainties (dB, deg).
+    """
+    d_db, d_deg = np.abs(20 * np.log10(np.abs(q))), np.abs(np.degrees(np.angle(q)))
+    r_db = np.asarray(sd_r[0], float) if sd_r is not None else np.zeros(q.size)
+    r_deg = np.asarray(sd_r[1], float) if sd_r is not None else np.zeros(q.size)
+    u_db = SPREAD_Z * np.sqrt(c_db ** 2 + r_db ** 2)
+    u_deg = SPREAD_Z * np.sqrt(c_deg ** 2 + r_deg ** 2)
+    w = np.maximum(np.where(d_db > u_db, d_db / tol_db, 0.0), np.where(d_deg > u_deg, d_deg / tol_deg, 0.0)) / widen
+    return w, d_db, d_deg, u_db, u_deg
+
+
+def _timing_rival(G: np.ndarray, f: np.ndarray, widen: np.ndarray, c_db: np.ndarray, c_deg: np.ndarray,
+                  spread: dict[str, Any], tol_db: float, tol_deg: float, timing_offset_s: float,
+                  reasons: list[str], fixes: list[str], details: dict[str, Any]) -> None:
+    """Check 9 of the module: the timing offset the held-out data could not refuse, against ``G`` (appends a reason).
+
+    ``G`` is the chosen model's response at ``f`` (Hz); ``c_db`` / ``c_deg`` its standard errors (dB, deg).
+    """
+    tr = spread.get("timing_rival")
+    if tr is None:
+        return
+    m, tau_r, sd_r = tr[0], float(tr[1]), tr[2]
+    s = 2j * math.pi * f
+    with np.errstate(all="ignore"):
+        q = (np.polyval(np.asarray(m.num, float), s) / np.polyval(np.asarray(m.den, float), s)) / G
+    if not np.all(np.isfinite(q)):
+        return
+    # G against G: the two fits say the same of the data (their offsets differ by tau_r - timing_offset_s);
+    # they differ in what they call the plant
+    w, d_db, d_deg, u_db, u_deg = _beyond(q, c_db, c_deg, sd_r, tol_db, tol_deg, widen)
+    i = int(np.argmax(w))
+    details.update(timing_rival_offset_s=tau_r, timing_rival_max_db=float(np.max(d_db)),
+                   timing_rival_max_deg=float(np.max(d_deg)), timing_rival_ratio=float(w[i]))
+    if w[i] > TIMING_FACTOR:
+        reasons.append(f"the timing offset between the channels cannot be told from the model's phase: with an "
+                       f"offset of {1e3 * tau_r:+.3g} ms (a sampling convention) instead of "
+                       f"{1e3 * timing_offset_s:+.3g} ms the same order fits the held-out data as well yet its G "
+                       f"differs by {d_db[i]:.2g} dB / {d_deg[i]:.2g} deg at {f[i]:.3g} Hz (beyond their combined "
+                       f"95 % uncertainty +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg and the tolerance "
+                       f"{tol_db * widen[i]:.2g} dB / {tol_deg * widen[i]:.2g} deg there)")
+        fixes.append("log at a higher sample rate (a sampling convention's offset is a fraction of a sample: its "
+                     "phase at the band's top shrinks with the sample period), or add an input whose latency is "
+                     "known (a step logged with both channels on one clock); if the loggers' convention is known, "
+                     "give it (--input-hold, or --max-timing-samples 0 for a plain zero-order hold)")
 
 
 def check_model_json(model_json: dict[str, Any], *, min_compare_fit_pct: float = MIN_COMPARE_FIT_PCT) -> ModelCheck:
