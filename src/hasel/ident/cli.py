@@ -57,6 +57,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-markers", action="store_true",
                    help="ignore the log's segment markers and find the operating points from the input")
     p.add_argument("--paper", action="store_true", help="draw the paper's P(s) in the Bode plot whatever the units")
+    p.add_argument("--input-hold", choices=("zoh", "centred"), default="zoh",
+                   help="sampling convention of the input: held until the next sample (default) or an "
+                        "instantaneous reading")
+    p.add_argument("--max-timing-samples", type=float, default=1.5, metavar="N",
+                   help="largest timing offset between the input and output samples estimated, raw samples "
+                        "(default 1.5; 0 when the loggers' convention is known: no offset is estimated)")
 
 
 def _write_json(path: str, obj: dict[str, Any]) -> None:
@@ -94,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     result = identify(data.t_s, data.u, data.y, segments=markers or None, input_name=data.input_name,
                       output_name=data.output_name, progress=say, band_hz=args.band, order=args.order,
                       max_poles=args.max_poles, delay=args.delay, holdout_fraction=args.holdout,
-                      settle_s=args.settle)
+                      settle_s=args.settle, input_hold=args.input_hold,
+                      max_timing_samples=args.max_timing_samples)
     result.notes[:0] = list(getattr(data, "notes", ()) or ())
     if args.json:
         _write_json(args.json, result.to_model_json())
