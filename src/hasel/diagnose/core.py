@@ -215,7 +215,7 @@ class DiagnoseOptions:
         repeated [design: no new threshold, the forward rounds' own; checked on combos]. A newcomer
         is otherwise credited with what re-fitting the earlier effects would have removed.
     load_adds_mass : bool
-        A ``load_mass`` that raises the resonances (mass ratio < 0) in the final set (after the joint
+        On a model with resonances, a ``load_mass`` that raises them (mass ratio < 0) in the final set (after the joint
         refinement) is not named; it is taken out and the others are refitted jointly: a load adds
         inertia, and a raised resonance is a correction of the model or of another effect's form
         (:func:`raised_resonance`) [design; checked on combos]: the extra ``load_mass`` named in
@@ -782,17 +782,24 @@ def _repeat_text(tm: dict) -> str:
             f"{rp['mean_change_per_period']:+.3g} on average")
 
 
-def raised_resonance(effects: dict[str, EffectFit]) -> bool:
-    """True when ``effects`` holds a ``load_mass`` fit with a negative mass ratio (``mu < 0``).
+def raised_resonance(effects: dict[str, EffectFit], den: np.ndarray | None = None) -> bool:
+    """True when ``effects`` holds a ``load_mass`` fit with a negative mass ratio (``mu < 0``) on a model
+    with a resonance (``den``, descending powers of s, has a complex pole pair; None: assumed).
 
-    A load adds inertia: its resonances fall (:mod:`hasel.effects.load`). A fit that raises them
-    (the family's bounds allow ``mu`` down to -0.8 so that its refinement can pass through zero) is
-    a linear correction of the model or of another effect's form, not an added mass: such a set is
-    no candidate for naming ``load_mass`` (beside a rate limit, a drift or a hysteresis it patched
-    their forms on the ``bench/tune_diag`` combinations, ``mu`` -0.38 to -0.73; every load named
-    there with a load in its truth had ``mu`` 0.18 or more)."""
+    On a model with resonances a load scales their inertia (:func:`hasel.effects.load.loaded_den`):
+    an added load lowers them, ``mu > 0``. A fit that raises them (the family's bounds allow ``mu``
+    down to -0.8 so that its refinement can pass through zero) is a correction of the model or of
+    another effect's form, not a load: beside a rate limit, a drift or a hysteresis it patched their
+    forms on the ``bench/tune_diag`` combinations (``mu`` -0.38 to -0.73; every load named there with
+    a load in its truth had ``mu`` 0.18 or more). Without a resonance the load moves the slowest real
+    pole, and a faster pole (``mu < 0``) is a changed load too (a brake's damping on a motor): False."""
     f = effects.get("load_mass")
-    return f is not None and bool(f.theta) and f.theta[0] < 0.0
+    if f is None or not f.theta or f.theta[0] >= 0.0:
+        return False
+    if den is None:
+        return True
+    p = np.roots(np.asarray(den, float))
+    return bool(np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))))
 
 
 def _fixed(name: str, fit: EffectFit) -> bool:
@@ -1398,7 +1405,8 @@ def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
     for old in [n for n, v in st.current.items() if n != name and not _fixed(n, v)]:
         base = {k2: v for k2, v in st.current.items() if k2 != old}
         alts = [a for a in _fit_candidates(ctx, base, [f for f in FAMILIES if f not in st.current])
-                if not linear_static(ctx.pipe, a[6]) and not (ctx.opts.load_adds_mass and raised_resonance(a[6]))]
+                if not linear_static(ctx.pipe, a[6])
+                and not (ctx.opts.load_adds_mass and raised_resonance(a[6], ctx.pipe.den))]
         if alts and alts[0][0] < ctx.opts.swap_ratio * st.mse_ho:
             a = alts[0]
             ctx.say(f"  swap: {a[2]} replaces {old} (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> "
@@ -1553,7 +1561,7 @@ def _joint_refine_stage(ctx: _Context, st: _State) -> None:
         refined = joint_refine(ctx.pipe, st.current, max_nfev=ctx.opts.joint_refine_nfev)
         m_tr, m_ho, e_new = ctx.scores(refined)
         if (m_ho <= st.mse_ho and not linear_static(ctx.pipe, refined)
-                and not (ctx.opts.load_adds_mass and raised_resonance(refined))):
+                and not (ctx.opts.load_adds_mass and raised_resonance(refined, ctx.pipe.den))):
             ctx.say(f"joint refinement: validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho):.4f}")
             st.adopt(refined, m_tr, m_ho, e_new)
 
@@ -1569,7 +1577,8 @@ def _refit_rest(ctx: _Context, rest: dict[str, EffectFit]) -> tuple[dict[str, Ef
     (``other_pairs.py`` seed 5, case 13), whose share fell below ``min_next_gain``."""
     opts = ctx.opts
     tries = [rest] + ([joint_refine(ctx.pipe, rest, max_nfev=opts.joint_refine_nfev)] if rest else [])
-    scored = [(ctx.scores(e), e) for e in tries if not (opts.load_adds_mass and raised_resonance(e))]
+    scored = [(ctx.scores(e), e) for e in tries
+              if not (opts.load_adds_mass and raised_resonance(e, ctx.pipe.den))]
     (m_tr, m_ho, e_ho), eff = min(scored or [(ctx.scores(rest), rest)], key=lambda x: x[0][0])
     return eff, m_tr, m_ho, e_ho
 
@@ -1590,7 +1599,7 @@ def _backward_check(ctx: _Context, st: _State) -> None:
     and effects named by the repeat or clip checks (seen directly in the data) keep their own tests.
     """
     opts = ctx.opts
-    if opts.load_adds_mass and raised_resonance(st.current):
+    if opts.load_adds_mass and raised_resonance(st.current, ctx.pipe.den):
         # a raised resonance is no added load (see raised_resonance): out of the final set, the others
         # refitted. Not during the rounds: a first load fitted alone may raise the resonance and still be
         # the path to the true set, its mass ratio turning positive once the other effects are in
