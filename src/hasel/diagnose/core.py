@@ -215,19 +215,21 @@ class DiagnoseOptions:
         repeated [design: no new threshold, the forward rounds' own; checked on combos]. A newcomer
         is otherwise credited with what re-fitting the earlier effects would have removed.
     load_adds_mass : bool
-        On a model with resonances, a ``load_mass`` that raises them (mass ratio < 0) in the final set (after the joint
-        refinement) is not named; it is taken out and the others are refitted jointly: a load adds
-        inertia, and a raised resonance is a correction of the model or of another effect's form
-        (:func:`raised_resonance`), when the load was added beside an earlier effect (not the
-        first round's effect: alone it is a change of the dynamics to report, e.g. the DC motor with
-        brake, whose identified model's resonance it raises) [design; checked on combos]: the extra ``load_mass`` named in
-        ``combos.py`` seed 21 (combo_12, combo_13) and ``other_pairs.py`` seed 5 (case 4) had mass
-        ratios -0.73, -0.44, -0.38; the 24 loads named with a load in their truth (combos,
-        other_pairs, cases.py seed 7) had 0.18 to 8.2. Refinements (swap, joint) into a raised
-        resonance are not taken. It was first a filter of every round's candidates; the held-back
-        check (``combos.py`` seed 23, combo_13: a load, a rate limit and a slew limit) then named
-        nothing: the first round's best, a load fitted alone, raised the resonance (its mass ratio
-        turned positive, 4.2, once the others were in), and without it no first effect passed.
+        On a model with resonances, a ``load_mass`` that raises them (mass ratio < 0) in the final
+        set (after the joint refinement), added beside an earlier effect, is not named: it is taken
+        out and the others are refitted jointly. A load adds inertia; a raised resonance beside
+        another effect is a correction of the model or of that effect's form
+        (:func:`raised_resonance`). The first round's effect is kept whatever its sign: alone it is
+        a change of the dynamics to report (the DC motor with brake, whose identified model's
+        resonance it raises). Refinements (swap, joint) into a raised resonance are not taken.
+        [design; checked on combos]: the extra ``load_mass`` named in ``combos.py`` seed 21
+        (combo_12, combo_13) and ``other_pairs.py`` seed 5 (case 4) had mass ratios -0.73, -0.44,
+        -0.38; the 24 loads named with a load in their truth (combos, other_pairs, cases.py seed 7)
+        had 0.18 to 8.2. It was first a filter of every round's candidates; the held-back check
+        (``combos.py`` seed 23, combo_13: a load, a rate limit and a slew limit) then named nothing:
+        the first round's best, a load fitted alone, raised the resonance (its mass ratio turned
+        positive, 4.2, once the others were in), and without it no first effect passed
+        (``bench/tune_diag/RESULT-h-prec.md``).
     identify : {"auto", "internal", "ident"}
         Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
         else the internal output-error fit [design: "auto" keeps the one whose simulation
