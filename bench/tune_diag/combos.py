@@ -96,44 +96,47 @@ def _draw_effects(rng: np.random.Generator, k: int) -> tuple[list[F], bool]:
 def make(directory: str, seed: int = 21, n: int = 24, n_free: int = 4, n_single: int = 4) -> list[dict]:
     """Write ``n`` combination cases (pairs and triples alternating), ``n_single`` single effects and
     ``n_free`` effect-free logs to ``directory``; returns their labels (kept here, not in the files)."""
-    out = []
     plan = [("pair" if i % 2 == 0 else "triple") for i in range(n)] + ["single"] * n_single + ["free"] * n_free
-    for i, kind in enumerate(plan):
-        rng = np.random.default_rng([seed, i])
-        design = DESIGNS[i % len(DESIGNS)]
-        rate = RATES[int(rng.integers(len(RATES)))]
-        dur = 40.0 if rate <= 1000.0 else 20.0
-        if design == "paper":
-            u, _ = o.excitation(rng, rate)
-        else:
-            u = _command(design, rng, rate, dur)
-        noise_kind = NOISES[int(rng.integers(len(NOISES)))]
-        sd = float(rng.uniform(0.003, 0.012))
-        k = {"pair": 2, "triple": 3, "single": 1, "free": 0}[kind]
-        for _ in range(12):
-            effs, clip = _draw_effects(rng, k) if k else ([], False)
-            vclip = _voltage_clip(u, rng) if clip else None
-            z = _chain(u, rate, effs, vclip)
-            if not np.all(np.isfinite(z)):
-                continue
-            vis = [float(np.std(z - _chain(u, rate, [e for e in effs if e is not x], vclip))) / sd for x in effs]
-            if clip:
-                vis.append(float(np.std(z - _chain(u, rate, effs, None))) / sd)
-            if all(v >= MIN_VISIBLE for v in vis):
-                break
-        else:
-            continue  # nothing visible enough drawn: no case
-        nz = o._coloured(rng, u.size, rate, sd, noise_kind)
-        y = np.round((z + nz) / o.LASER_LSB_MM) * o.LASER_LSB_MM
-        num, den = paper.plant_tf()
-        path = os.path.join(directory, f"combo_{i:02d}_{kind}.npz")
-        np.savez_compressed(path, t_s=np.arange(u.size) / rate, voltage_kv=u, stroke_mm=y, num=num, den=den)
-        labels = sorted({e.name for e in effs} | ({"saturation"} if clip else set()))
-        out.append({"path": path, "kind": f"{kind}:{design}:{rate:g}:{noise_kind}", "labels": labels,
-                    "visible": [round(v, 1) for v in vis] if k else [],
-                    "truth": [f"{e.name}:{e.kind}:{ {a: round(b, 4) for a, b in e.params.items()} }" for e in effs]
-                    + ([f"voltage clip {vclip:.2f} kV"] if clip else [])})
-    return out
+    return [c for c in (make_case(directory, seed, i, kind) for i, kind in enumerate(plan)) if c is not None]
+
+
+def make_case(directory: str, seed: int, i: int, kind: str) -> dict | None:
+    """Case ``i`` of :func:`make` (``kind`` pair, triple, single or free; its draws depend on ``seed``
+    and ``i`` only), written to ``directory``; None when nothing visible enough was drawn."""
+    rng = np.random.default_rng([seed, i])
+    design = DESIGNS[i % len(DESIGNS)]
+    rate = RATES[int(rng.integers(len(RATES)))]
+    dur = 40.0 if rate <= 1000.0 else 20.0
+    if design == "paper":
+        u, _ = o.excitation(rng, rate)
+    else:
+        u = _command(design, rng, rate, dur)
+    noise_kind = NOISES[int(rng.integers(len(NOISES)))]
+    sd = float(rng.uniform(0.003, 0.012))
+    k = {"pair": 2, "triple": 3, "single": 1, "free": 0}[kind]
+    for _ in range(12):
+        effs, clip = _draw_effects(rng, k) if k else ([], False)
+        vclip = _voltage_clip(u, rng) if clip else None
+        z = _chain(u, rate, effs, vclip)
+        if not np.all(np.isfinite(z)):
+            continue
+        vis = [float(np.std(z - _chain(u, rate, [e for e in effs if e is not x], vclip))) / sd for x in effs]
+        if clip:
+            vis.append(float(np.std(z - _chain(u, rate, effs, None))) / sd)
+        if all(v >= MIN_VISIBLE for v in vis):
+            break
+    else:
+        return None  # nothing visible enough drawn: no case
+    nz = o._coloured(rng, u.size, rate, sd, noise_kind)
+    y = np.round((z + nz) / o.LASER_LSB_MM) * o.LASER_LSB_MM
+    num, den = paper.plant_tf()
+    path = os.path.join(directory, f"combo_{i:02d}_{kind}.npz")
+    np.savez_compressed(path, t_s=np.arange(u.size) / rate, voltage_kv=u, stroke_mm=y, num=num, den=den)
+    labels = sorted({e.name for e in effs} | ({"saturation"} if clip else set()))
+    return {"path": path, "kind": f"{kind}:{design}:{rate:g}:{noise_kind}", "labels": labels,
+            "visible": [round(v, 1) for v in vis] if k else [],
+            "truth": [f"{e.name}:{e.kind}:{ {a: round(b, 4) for a, b in e.params.items()} }" for e in effs]
+            + ([f"voltage clip {vclip:.2f} kV"] if clip else [])}
 
 
 def main(argv: list[str] | None = None) -> int:
