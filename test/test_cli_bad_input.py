@@ -153,8 +153,11 @@ def test_outputs_honour_the_umask_all_alike(files, tmp_path, capsys):
         y = np.convolve(u, np.exp(-np.arange(50) / 10) / 10)[:t.size]
         np.savetxt(tmp_path / "d.csv", np.column_stack([t, u, y]), delimiter=",",
                    header="t_s,voltage_kv,stroke_mm", comments="")
+        # the JSON and the plot are written whether or not the model passes its checks (exit 0 or 1);
+        # since session 8 this noise-free toy is refused: check 6 finds the response unpinned at
+        # 22.4 Hz, past the chirp's last frequency (20.1 Hz) at the excited band's top edge
         assert hasel_main(["identify", str(tmp_path / "d.csv"), "--json", str(tmp_path / "m.json"),
-                           "--plot", str(tmp_path / "b.png")]) == 0
+                           "--plot", str(tmp_path / "b.png")]) in (0, 1)
     finally:
         os.umask(old)
     modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir() if p.name != "d.csv"}
