@@ -806,6 +806,12 @@ def raised_resonance(effects: dict[str, EffectFit], den: np.ndarray | None = Non
     return bool(np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))))
 
 
+def _raises(ctx: _Context, effects: dict[str, EffectFit]) -> bool:
+    """True when ``load_adds_mass`` is on and ``effects`` hold a load that raises the nominal model's
+    resonances (:func:`raised_resonance`): a set not to adopt."""
+    return ctx.opts.load_adds_mass and raised_resonance(effects, ctx.pipe.den)
+
+
 def _fixed(name: str, fit: EffectFit) -> bool:
     """A part of the chain that is not searched: a re-identified linear model, a measured clip."""
     return name == LINEAR or fit.variant.startswith("measured")
@@ -1410,7 +1416,7 @@ def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
         base = {k2: v for k2, v in st.current.items() if k2 != old}
         alts = [a for a in _fit_candidates(ctx, base, [f for f in FAMILIES if f not in st.current])
                 if not linear_static(ctx.pipe, a[6])
-                and not (ctx.opts.load_adds_mass and raised_resonance(a[6], ctx.pipe.den))]
+                and not _raises(ctx, a[6])]
         if alts and alts[0][0] < ctx.opts.swap_ratio * st.mse_ho:
             a = alts[0]
             ctx.say(f"  swap: {a[2]} replaces {old} (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> "
@@ -1565,7 +1571,7 @@ def _joint_refine_stage(ctx: _Context, st: _State) -> None:
         refined = joint_refine(ctx.pipe, st.current, max_nfev=ctx.opts.joint_refine_nfev)
         m_tr, m_ho, e_new = ctx.scores(refined)
         if (m_ho <= st.mse_ho and not linear_static(ctx.pipe, refined)
-                and not (ctx.opts.load_adds_mass and raised_resonance(refined, ctx.pipe.den))):
+                and not _raises(ctx, refined)):
             ctx.say(f"joint refinement: validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho):.4f}")
             st.adopt(refined, m_tr, m_ho, e_new)
 
@@ -1581,10 +1587,24 @@ def _refit_rest(ctx: _Context, rest: dict[str, EffectFit]) -> tuple[dict[str, Ef
     (``other_pairs.py`` seed 5, case 13), whose share fell below ``min_next_gain``."""
     opts = ctx.opts
     tries = [rest] + ([joint_refine(ctx.pipe, rest, max_nfev=opts.joint_refine_nfev)] if rest else [])
-    scored = [(ctx.scores(e), e) for e in tries
-              if not (opts.load_adds_mass and raised_resonance(e, ctx.pipe.den))]
+    scored = [(ctx.scores(e), e) for e in tries if not _raises(ctx, e)]
     (m_tr, m_ho, e_ho), eff = min(scored or [(ctx.scores(rest), rest)], key=lambda x: x[0][0])
     return eff, m_tr, m_ho, e_ho
+
+
+def _backward_round(ctx: _Context, st: _State, name: str, refit: dict[str, EffectFit], m_ho_r: float,
+                    accepted: bool, **extra: float | bool) -> None:
+    """Record one test of the backward check in ``st.rounds``: ``name`` judged against the others refitted
+    (``refit``, validation mse ``m_ho_r``); ``extra`` keys (its held-out test, or why it was taken out)."""
+    st.rounds.append({"round": len(st.rounds) + 1, "backward_check": True, "best": name,
+                      "gain": _gain_without(st, m_ho_r), **extra, "accepted": bool(accepted),
+                      "candidates": [{"name": " + ".join(k for k in refit if k != LINEAR),
+                                      "nrmse_validation": ctx.to_nrmse(m_ho_r)}]})
+
+
+def _gain_without(st: _State, m_ho_r: float) -> float:
+    """Share of the validation mse ``m_ho_r`` of a set without one effect that the effect removes."""
+    return (m_ho_r - st.mse_ho) / m_ho_r if m_ho_r > 0 else 0.0
 
 
 def _backward_check(ctx: _Context, st: _State) -> None:
@@ -1605,18 +1625,15 @@ def _backward_check(ctx: _Context, st: _State) -> None:
     opts = ctx.opts
     first = next((r["best"] for r in st.rounds if "candidates" in r and r.get("accepted")
                   and not any(r.get(k) for k in ("backward_check", "repeat_check", "clip_check"))), "")
-    if opts.load_adds_mass and raised_resonance(st.current, ctx.pipe.den) and "load_mass" not in first.split(" + "):
+    if _raises(ctx, st.current) and "load_mass" not in first.split(" + "):
         # a raised resonance added beside an earlier effect is no added load (see raised_resonance): out of
         # the final set, the others refitted. Not during the rounds: a first load fitted alone may raise the
         # resonance and still be the path to the true set, its mass ratio turning positive once the other
         # effects are in. A first effect that raises the resonance is a change of the dynamics the user
         # must see (the DC motor with brake: its identified model's resonance raised, 1.74 -> 0.0088)
         refit, m_tr_r, m_ho_r, e_r = _refit_rest(ctx, _without(st.current, "load_mass"))
-        st.rounds.append({"round": len(st.rounds) + 1, "backward_check": True, "best": "load_mass",
-                          "raised_resonance": True, "mass_ratio": float(st.current["load_mass"].theta[0]),
-                          "gain": (m_ho_r - st.mse_ho) / m_ho_r if m_ho_r > 0 else 0.0, "accepted": False,
-                          "candidates": [{"name": " + ".join(k for k in refit if k != LINEAR),
-                                          "nrmse_validation": ctx.to_nrmse(m_ho_r)}]})
+        _backward_round(ctx, st, "load_mass", refit, m_ho_r, False, raised_resonance=True,
+                        mass_ratio=float(st.current["load_mass"].theta[0]))
         ctx.say(f"load_mass raises the resonances (mass ratio {st.current['load_mass'].theta[0]:.3g}): no added "
                 f"load, taken out (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho_r):.4f})")
         st.evidence_of.pop("load_mass", None)
@@ -1632,13 +1649,10 @@ def _backward_check(ctx: _Context, st: _State) -> None:
         for name in names_:
             rest = _without(st.current, name)
             refit, m_tr_r, m_ho_r, e_r = _refit_rest(ctx, rest)
-            gain = (m_ho_r - st.mse_ho) / m_ho_r if m_ho_r > 0 else 0.0
+            gain = _gain_without(st, m_ho_r)
             t_blk, z_col = ctx.held_out(e_r, st.e_ho)
             ok = gain >= opts.min_next_gain and (t_blk >= opts.t_min or z_col >= opts.zc_min)
-            st.rounds.append({"round": len(st.rounds) + 1, "backward_check": True, "best": name,
-                              "gain": gain, "t_block": t_blk, "z_coloured": z_col, "accepted": bool(ok),
-                              "candidates": [{"name": " + ".join(k for k in refit if k != LINEAR),
-                                              "nrmse_validation": ctx.to_nrmse(m_ho_r)}]})
+            _backward_round(ctx, st, name, refit, m_ho_r, ok, t_block=t_blk, z_coloured=z_col)
             ctx.say(f"backward check: {name} given the others refitted removes {100 * gain:.1f} % (held-out block "
                     f"score {t_blk:.1f}, coloured-noise z {z_col:.1f}) -> {'kept' if ok else 'fails'}")
             if not ok:
