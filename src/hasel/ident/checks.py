@@ -364,6 +364,13 @@ def inband_errors(model: Any, measured: Any, band_hz: tuple[float, float], timin
     return f, G / H, rel, z
 
 
+def _response(m: Any, f_hz: np.ndarray) -> np.ndarray:
+    """``m``'s response ``num(j w) / den(j w)`` at ``f_hz`` (Hz), its units (no delay or timing offset)."""
+    s = 2j * math.pi * np.asarray(f_hz, float)
+    num, den = np.atleast_1d(np.asarray(m.num, float)), np.atleast_1d(np.asarray(m.den, float))
+    return np.polyval(num, s) / np.polyval(den, s)
+
+
 def _longest_run_octaves(f: np.ndarray, bad: np.ndarray) -> float:
     """The longest run of neighbouring flagged points, in octaves (``f`` ascending, Hz)."""
     run, start = 0.0, None
@@ -390,7 +397,7 @@ def _residual_bias(model: Any, resid: Any, band_hz: tuple[float, float], reasons
     if np.count_nonzero(use) < 4:
         return
     f, E, sig = f[use], E[use], sig[use]
-    G = np.polyval(num, 2j * math.pi * f) / np.polyval(den, 2j * math.pi * f)
+    G = _response(model, f)
     g0 = abs(float(num[-1] / den[-1])) if den[-1] != 0 else 0.0
     rel = np.abs(E) / np.maximum(np.abs(G), SPREAD_FLOOR * g0)
     z = np.abs(E) / np.maximum(sig / math.sqrt(2.0), 1e-300)
@@ -441,11 +448,7 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
         return
     span = f"{f[0]:.3g}-{f[-1]:.3g} Hz"
 
-    def resp(m: Any) -> np.ndarray:
-        s = 2j * math.pi * f
-        return np.polyval(np.asarray(m.num, float), s) / np.polyval(np.asarray(m.den, float), s)
-
-    G = resp(model)
+    G = _response(model, f)
     g0 = abs(float(np.asarray(model.num, float)[-1] / np.asarray(model.den, float)[-1]))
     widen = np.maximum(1.0, INBAND_REL_TOL * g0 / np.maximum(np.abs(G), 1e-300)) if math.isfinite(g0) \
         else np.ones(f.size)
@@ -479,7 +482,7 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
         # the sampling convention's lead in its phase, 13 deg at 14 Hz for half a sample at 200 Hz)
         tau_r = float(rival[5]) if len(rival) > 5 else timing_offset_s
         with np.errstate(all="ignore"):
-            q = resp(m) / G * np.exp(-2j * math.pi * f * (tau_r - timing_offset_s))
+            q = _response(m, f) / G * np.exp(-2j * math.pi * f * (tau_r - timing_offset_s))
         if not np.all(np.isfinite(q)):
             continue
         # the difference of two estimates from the same data is noise while it is within their combined
@@ -534,9 +537,8 @@ def _timing_rival(G: np.ndarray, f: np.ndarray, widen: np.ndarray, c_db: np.ndar
     if tr is None:
         return
     m, tau_r, sd_r = tr[0], float(tr[1]), tr[2]
-    s = 2j * math.pi * f
     with np.errstate(all="ignore"):
-        q = (np.polyval(np.asarray(m.num, float), s) / np.polyval(np.asarray(m.den, float), s)) / G
+        q = _response(m, f) / G
     if not np.all(np.isfinite(q)):
         return
     # G against G: the two fits say the same of the data (their offsets differ by tau_r - timing_offset_s);

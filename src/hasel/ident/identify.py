@@ -1229,24 +1229,22 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         # the data cannot tell from the phase of G is not pinned; without one (the held-out data chose none, or
         # it is off) the covariance is conditional on that choice (with it always, right 200 Hz paper-chirp and
         # 10 kHz campaign models read +-5-6 deg at 11-13 Hz)
-        kept = max_shift if oe.shift != 0.0 else 0.0
-        sd = response_uncertainty(oe, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold, block=oe_block,
-                                  max_shift=kept, drift_s=opts.drift_knot_s)
+        def spread_of(fit: Any, shift_free: bool) -> Any:
+            return response_uncertainty(fit, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold,
+                                        block=oe_block, max_shift=max_shift if shift_free else 0.0,
+                                        drift_s=opts.drift_knot_s)
+
+        sd = spread_of(oe, oe.shift != 0.0)
         # each tied rival with its own response standard errors (check 7 judges the difference against both)
         # and its own timing offset (the rivals were fitted before the offset was chosen for the chosen order)
-        rivals = []
-        for c in ok:
-            if (c[0], c[1]) != (nz, n_p) and math.isfinite(c[4]):
-                sd_r = response_uncertainty(c[3], ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold,
-                                            block=oe_block, max_shift=max_shift if c[3].shift != 0.0 else 0.0,
-                                            drift_s=opts.drift_knot_s)
-                rivals.append((c[0], c[1], c[3].model, float(c[4]), sd_r, -float(c[3].shift) / oe_rate))
+        rivals = [(c[0], c[1], c[3].model, float(c[4]), spread_of(c[3], c[3].shift != 0.0),
+                   -float(c[3].shift) / oe_rate)
+                  for c in ok if (c[0], c[1]) != (nz, n_p) and math.isfinite(c[4])]
         # the same order with the timing offset the held-out data could not refuse (a tie): its response
         # standard errors with the offset a parameter (check 9)
         t_rival = None
         if timing_alt is not None and oe.shift == 0.0:
-            sd_t = response_uncertainty(timing_alt, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold,
-                                        block=oe_block, max_shift=max_shift, drift_s=opts.drift_knot_s)
+            sd_t = spread_of(timing_alt, True)
             t_rival = (timing_alt.model, -float(timing_alt.shift) / oe_rate, sd_t, float(timing_alt.nrmse_heldout))
         resp_spread = {"f_hz": f_chk, "sd_db": None if sd is None else sd[0], "sd_deg": None if sd is None else sd[1],
                        "rivals": rivals, "timing_rival": t_rival,
