@@ -100,18 +100,16 @@ def reference_steps(log: ClosedLoopLog, tol_s: float = 2e-3) -> tuple[list[float
     if values.size < 2:
         raise BadInputError(f"{log.source}: the reference never changes ({values.size} value); nothing to compare")
     holds = np.diff(times)
-    end = float(log.t_s[-1])
+    tail = float(log.t_s[-1]) - float(times[-1])
     hold = float(np.median(holds))
-    if np.max(np.abs(holds - hold)) <= tol_s:
-        if end < times[-1] + 0.5 * hold:
-            raise BadInputError(f"{log.source}: the log ends {end - times[-1]:.3f} s after the last reference "
-                                f"change; it needs about {hold:.3f} s")
+    even = np.max(np.abs(holds - hold)) <= tol_s
+    need = hold if even else float(np.min(holds))
+    if tail < 0.5 * need:
+        raise BadInputError(f"{log.source}: the log ends {tail:.3f} s after the last reference change; "
+                            f"it needs about {need:.3f} s to show that step")
+    if even:
         return [float(v) for v in values], hold, float(times[0])
-    last = min(end - float(times[-1]), float(np.max(holds)))
-    if last < 0.5 * float(np.min(holds)):
-        raise BadInputError(f"{log.source}: the log ends {end - times[-1]:.3f} s after the last reference change; "
-                            f"it needs about {np.min(holds):.3f} s to show that step")
-    return [float(v) for v in values], [float(h) for h in holds] + [last], float(times[0])
+    return [float(v) for v in values], [float(h) for h in holds] + [min(tail, float(np.max(holds)))], float(times[0])
 
 
 def measured_steps(log: ClosedLoopLog, sequence: list[float], hold_s: float | list[float],

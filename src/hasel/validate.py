@@ -77,7 +77,6 @@ def text_file(name: str, path: str, limit_bytes: int = 64 << 20) -> Path:
     return p
 
 
-
 def excited(name: str, samples: Any, purpose: str) -> None:
     """Raise :class:`BadInputError` if the input ``samples`` (any unit) never change: nothing to ``purpose`` from.
 
