@@ -109,7 +109,7 @@ def _identify_stage(out: Path, quick: bool) -> dict:
 
     print(f"$ hasel identify {log} --json {out / 'model.json'} --plot {out / 'bode.png'} --report {out / 'identify'}")
     _hasel(["identify", str(log), "--json", str(out / "model.json"), "--plot", str(out / "bode.png"),
-            "--report", str(out / "identify")], "identification of the demo's own log failed")
+            "--report", str(out / "identify"), "--overwrite"], "identification of the demo's own log failed")
     model = json.loads((out / "model.json").read_text())
     f = np.geomspace(0.1, 15.0, 200)
     ratio = tf_freqresp(model["num"], model["den"], f) / tf_freqresp(*paper.plant_tf(), f)
@@ -152,7 +152,7 @@ def _gap_stage(out: Path, quick: bool) -> dict:
     argv = ["diagnose", str(out / "truth_chirp.mcap"), "--heldout", str(out / "truth_heldout.mcap"),
             "--model", str(out / "model.json"), "--json", str(out / "verdict.json"),
             "--export-sim", str(out / "gap_sim.csv"), "--report", str(out / "diagnose"),
-            "--export-plant", str(out / "augmented.json")]
+            "--export-plant", str(out / "augmented.json"), "--overwrite"]
     print("$ hasel " + " ".join(argv))
     _hasel(argv, "the diagnosis of the demo's own logs failed")
     verdict = json.loads((out / "verdict.json").read_text())
