@@ -242,3 +242,25 @@ def test_drift_is_told_from_a_static_map_by_the_change_between_repeats():
     v = diagnose(sched.t_s, sched.command_kv, y, model=_nominal(), units=("kV", "mm"))
     assert {"static_nonlinearity", "charge_drift"} <= set(v.names[:2])
     assert v.where["time"]["repeats"]["over_noise"] > 3.0
+
+
+def test_a_fallback_nominal_is_flagged_when_identify_refuses_the_log():
+    """Without --model, a log that hasel.ident refuses (a stroke clip at 4 mm and a strong input map make
+    no linear model pass its checks) falls back to the internal fit: the verdict must say so, first."""
+    from hasel.diagnose.core import Verdict, _identify
+    from hasel.diagnose.report import verdict_lines
+
+    rng = np.random.default_rng(31)
+    u = excitation(rng, quick=True)
+    act = TruthActuator([from_name("saturation", kind="stroke", limit_mm=4.0),
+                         from_name("static_nonlinearity", kind="electrostatic", strength=0.6)])
+    act.reset(float(u[0]))
+    y = act.measure_mm(act.run(u).stroke_mm) + 0.005 * rng.standard_normal(u.size)
+    _, _, src = _identify(prepare(np.arange(u.size) / act.rate_hz, u, y), DiagnoseOptions(), lambda m: None)
+    assert src["source"] == "identified from the log"
+    assert "failed its own checks" in src["details"]["note"]
+    assert src["training_nrmse_with_offset"] > 0.2  # the fit it falls back to misses a fifth of the output
+    assert "fallback" in src["warning"] and "--model" in src["warning"]
+    v = Verdict(effects=[], where={}, heldout={"nrmse_nominal": 0.3, "nrmse_augmented": 0.3, "gap_shrink": 0.0},
+                noise_floor_nrmse=0.01, model=src, rounds=[], working_rate_hz=1000.0)
+    assert verdict_lines(v)[0] == "warning: " + src["warning"]

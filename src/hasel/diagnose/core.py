@@ -448,6 +448,13 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
         cands.append((_train_fit(prep, num, den), num, den, {"source": "identified from the log", "details": info}))
     fit, num, den, src = min(cands, key=lambda c: c[0])
     src["training_nrmse_with_offset"] = fit
+    if note and src["source"] == "identified from the log":
+        # identify refused every linear model of this log: the verdict must not read as a gap to a trusted model
+        src["warning"] = (f"the nominal model is a fallback: hasel.ident refused a linear model of this log "
+                          f"(its reasons in model.details.note), so the internal output-error fit is used "
+                          f"(training compare fit {100 * (1 - fit):.0f} %); the effects are relative to that fit, "
+                          f"not to a trusted model: give the simulator's model with --model, or identify one first "
+                          f"from a small-amplitude linear experiment (hasel chirp, then hasel identify)")
     if len(cands) > 1:
         src["alternatives"] = {c[3]["source"]: c[0] for c in cands}
     return num, den, src

@@ -30,6 +30,9 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     floor = v.noise_floor_nrmse
     lines = [f"held-out NRMSE: nominal {h['nrmse_nominal']:.4f} -> augmented {h['nrmse_augmented']:.4f} "
              f"(noise floor {floor:.4f}; gap shrink {_share(h['gap_shrink'])})"]
+    warn = (getattr(v, "model", {}) or {}).get("warning")
+    if warn:
+        lines.insert(0, f"warning: {warn}")
     tm = getattr(v, "timing_offset", {}) or {}
     if tm.get("original_samples"):
         lines.append(f"timing offset (a sampling convention, not physics): the output lags the zero-order-hold "
