@@ -41,7 +41,8 @@ def run_case(label, corpus, hasel, work, timeout, tool_jobs):
     out = os.path.join(work, cid + ".json")
     if os.path.exists(out):
         os.remove(out)
-    cmd = [hasel, label["kind"]] + list(label["args"]) + ["--json", out]
+    sub = "identify" if label["kind"] == "ident" else "diagnose"
+    cmd = [hasel, sub] + list(label["args"]) + ["--json", out]
     if label["kind"] == "diagnose" and tool_jobs:
         cmd += ["--jobs", str(tool_jobs)]
     t0 = time.monotonic()
