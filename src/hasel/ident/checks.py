@@ -99,7 +99,10 @@ A model is usable when all of these hold:
    (the offset one of the parameters of the refitted one's covariance). A model whose
    phase near the band's top may be a sampling convention's lead is refused with the
    experiments that separate the two: a higher sample rate, an input of known latency,
-   or the convention given.
+   or the convention given. The same for a lower order kept with a tied timing offset
+   that is no sampling convention (:func:`hasel.ident.identify._lower_order_with_offset`),
+   judged against the higher order refitted with the offset free when that keeps the
+   offset (the two agree on the timing and differ in the dynamics).
 
 In 6, 7 and 9, as in 5, the tolerances are relative to the larger of ``|G|`` and a tenth
 of the static gain: where the response is more than 20 dB down they widen by
@@ -532,25 +535,35 @@ def _timing_rival(G: np.ndarray, f: np.ndarray, widen: np.ndarray, c_db: np.ndar
     """Check 9 of the module: the timing offset the held-out data could not refuse, against ``G`` (appends a reason).
 
     ``G`` is the chosen model's response at ``f`` (Hz); ``c_db`` / ``c_deg`` its standard errors (dB, deg).
+    ``spread["timing_rival"]``: one rival ``(model, offset s, (sd_db, sd_deg) or None, held-out NRMSE[, label])``
+    or a list of them (the worst is judged); the label names the rival's order (default "the same order").
     """
     tr = spread.get("timing_rival")
     if tr is None:
         return
-    m, tau_r, sd_r = tr[0], float(tr[1]), tr[2]
-    with np.errstate(all="ignore"):
-        q = _response(m, f) / G
-    if not np.all(np.isfinite(q)):
+    worst = None
+    for t in (tr if isinstance(tr, list) else [tr]):
+        m, tau_r, sd_r = t[0], float(t[1]), t[2]
+        with np.errstate(all="ignore"):
+            q = _response(m, f) / G
+        if not np.all(np.isfinite(q)):
+            continue
+        # G against G: the two fits say the same of the data (their offsets differ by tau_r - timing_offset_s);
+        # they differ in what they call the plant
+        w, d_db, d_deg, u_db, u_deg = _beyond(q, c_db, c_deg, sd_r, tol_db, tol_deg, widen)
+        i = int(np.argmax(w))
+        if worst is None or w[i] > worst[0]:
+            label = t[4] if len(t) > 4 and t[4] else "the same order (a sampling convention)"
+            worst = (float(w[i]), i, tau_r, label, d_db, d_deg, u_db, u_deg)
+    if worst is None:
         return
-    # G against G: the two fits say the same of the data (their offsets differ by tau_r - timing_offset_s);
-    # they differ in what they call the plant
-    w, d_db, d_deg, u_db, u_deg = _beyond(q, c_db, c_deg, sd_r, tol_db, tol_deg, widen)
-    i = int(np.argmax(w))
+    wi, i, tau_r, label, d_db, d_deg, u_db, u_deg = worst
     details.update(timing_rival_offset_s=tau_r, timing_rival_max_db=float(np.max(d_db)),
-                   timing_rival_max_deg=float(np.max(d_deg)), timing_rival_ratio=float(w[i]))
-    if w[i] > TIMING_FACTOR:
+                   timing_rival_max_deg=float(np.max(d_deg)), timing_rival_ratio=wi)
+    if wi > TIMING_FACTOR:
         reasons.append(f"the timing offset between the channels cannot be told from the model's phase: with an "
-                       f"offset of {1e3 * tau_r:+.3g} ms (a sampling convention) instead of "
-                       f"{1e3 * timing_offset_s:+.3g} ms the same order fits the held-out data as well yet its G "
+                       f"offset of {1e3 * tau_r:+.3g} ms instead of "
+                       f"{1e3 * timing_offset_s:+.3g} ms {label} fits the held-out data as well yet its G "
                        f"differs by {d_db[i]:.2g} dB / {d_deg[i]:.2g} deg at {f[i]:.3g} Hz (beyond their combined "
                        f"95 % uncertainty +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg and the tolerance "
                        f"{tol_db * widen[i]:.2g} dB / {tol_deg * widen[i]:.2g} deg there)")

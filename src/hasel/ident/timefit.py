@@ -626,40 +626,12 @@ def arx_start(u: np.ndarray, y: np.ndarray, rate_hz: float, n_p: int, pieces: Pi
     return TFModel(num=np.asarray(num, float) / den[0], den=np.asarray(den, float) / den[0])
 
 
-def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces,
-                         f_hz: np.ndarray, *, hold: str = "zoh", block: int = 1, max_shift: float = 0.0,
-                         drift_s: float = 0.0, cluster_s: float = 2.0) -> tuple[np.ndarray, np.ndarray] | None:
-    """Standard errors of ``oe.model``'s response at ``f_hz`` in dB and deg, from the output-error fit's covariance.
+def _oe_covariance(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *, hold: str,
+                  block: int, max_shift: float, drift_s: float, cluster_s: float) -> tuple | None:
+    """The cluster-robust covariance of :func:`oe_fit`'s parameters (see :func:`response_uncertainty`).
 
-    The parameters are those of :func:`oe_fit` (with the timing offset when
-    ``max_shift > 0``: its trade-off with the model's phase is part of the error;
-    its bound ``+-max_shift`` enters as a uniform prior, one pseudo-observation).
-    The response's sensitivities to them are exact derivatives of ``log G``.
-    Their covariance is the cluster-robust (sandwich) estimate
-    ``(J'J)^-1 (sum_c J_c' r_c r_c' J_c) (J'J)^-1`` over contiguous clusters of
-    ``cluster_s`` seconds of estimation samples: it holds for coloured noise, sensor
-    wander and the part of a model error that looks like noise, where the white-noise
-    ``s^2 (J'J)^-1`` is optimistic. Directions of the parameters the data do not
-    see at all (eigenvalues of ``J'J`` below 1e-10 of the largest, e.g. a nearly
-    cancelling pole-zero pair) are left out (a pseudo-inverse). Returns None when the
-    simulation fails.
-
-    Parameters
-    ----------
-    oe : OEResult
-        The fit (its model and timing offset are the point of expansion).
-    u, y, rate_hz, pieces, hold, block, drift_s :
-        As given to :func:`oe_fit`.
-    f_hz : ndarray
-        Frequencies, Hz.
-    max_shift : float
-        As given to :func:`oe_fit` (0: the timing offset was not estimated).
-    cluster_s : float
-        Length of the clusters, s.
-
-    Returns
-    -------
-    (sd_db, sd_deg) : tuple of ndarray, or None
+    Returns ``(cov, theta, nz, n_p, w0)`` (the timing offset last when ``max_shift > 0``,
+    in samples of ``u``), or None when the simulation fails or there are too few clusters.
     """
     m0 = oe.model
     w0 = float(np.max(np.abs(np.roots(m0.den)))) if m0.den.size > 1 else 1.0
@@ -730,6 +702,50 @@ def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: fl
     # the prior's pseudo-observation adds its own share (precision times the residuals' variance) to the meat
     cov_n = Ainv @ (meat * (n_cl / (n_cl - p_all)) + np.diag(prior * s2 if shift_free else prior)) @ Ainv
     cov = cov_n / np.outer(d, d)
+    return cov, theta, nz, n_p, w0
+
+
+def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces,
+                         f_hz: np.ndarray, *, hold: str = "zoh", block: int = 1, max_shift: float = 0.0,
+                         drift_s: float = 0.0, cluster_s: float = 2.0) -> tuple[np.ndarray, np.ndarray] | None:
+    """Standard errors of ``oe.model``'s response at ``f_hz`` in dB and deg, from the output-error fit's covariance.
+
+    The parameters are those of :func:`oe_fit` (with the timing offset when
+    ``max_shift > 0``: its trade-off with the model's phase is part of the error;
+    its bound ``+-max_shift`` enters as a uniform prior, one pseudo-observation).
+    The response's sensitivities to them are exact derivatives of ``log G``.
+    Their covariance is the cluster-robust (sandwich) estimate
+    ``(J'J)^-1 (sum_c J_c' r_c r_c' J_c) (J'J)^-1`` over contiguous clusters of
+    ``cluster_s`` seconds of estimation samples: it holds for coloured noise, sensor
+    wander and the part of a model error that looks like noise, where the white-noise
+    ``s^2 (J'J)^-1`` is optimistic. Directions of the parameters the data do not
+    see at all (eigenvalues of ``J'J`` below 1e-10 of the largest, e.g. a nearly
+    cancelling pole-zero pair) are left out (a pseudo-inverse). Returns None when the
+    simulation fails.
+
+    Parameters
+    ----------
+    oe : OEResult
+        The fit (its model and timing offset are the point of expansion).
+    u, y, rate_hz, pieces, hold, block, drift_s :
+        As given to :func:`oe_fit`.
+    f_hz : ndarray
+        Frequencies, Hz.
+    max_shift : float
+        As given to :func:`oe_fit` (0: the timing offset was not estimated).
+    cluster_s : float
+        Length of the clusters, s.
+
+    Returns
+    -------
+    (sd_db, sd_deg) : tuple of ndarray, or None
+    """
+    got = _oe_covariance(oe, u, y, rate_hz, pieces, hold=hold, block=block, max_shift=max_shift, drift_s=drift_s,
+                         cluster_s=cluster_s)
+    if got is None:
+        return None
+    cov, theta, nz, n_p, w0 = got
+    n_th, p_all = theta.size, cov.shape[0]
     # the response's sensitivities: log G at f against the model's parameters (the timing offset is not part
     # of G: its covariance with them still widens G's phase through the cross terms). Exact derivatives of
     # G = N(x) / D(x), x = s / w0, N = sum b_k x^k, D a product of x^2 + e^q0 x + e^q1 and x + e^q: a finite
@@ -754,3 +770,19 @@ def response_uncertainty(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: fl
     sd_db = 20.0 / np.log(10.0) * np.sqrt(np.maximum(var_re, 0.0))
     sd_deg = np.degrees(np.sqrt(np.maximum(var_im, 0.0)))
     return sd_db, sd_deg
+
+
+def shift_standard_error(oe: OEResult, u: np.ndarray, y: np.ndarray, rate_hz: float, pieces: Pieces, *,
+                         hold: str = "zoh", block: int = 1, max_shift: float = 0.0, drift_s: float = 0.0,
+                         cluster_s: float = 2.0) -> float:
+    """Standard error of ``oe.shift`` (samples of ``u``) from the covariance of :func:`response_uncertainty`.
+
+    The timing offset and the model's parameters are estimated together (their
+    trade-off widens it); the bound ``+-max_shift`` is its uniform prior. NaN when the
+    offset was not estimated (``max_shift <= 0``) or the covariance fails.
+    """
+    if max_shift <= 0:
+        return float("nan")
+    got = _oe_covariance(oe, u, y, rate_hz, pieces, hold=hold, block=block, max_shift=max_shift, drift_s=drift_s,
+                         cluster_s=cluster_s)
+    return float("nan") if got is None else float(np.sqrt(max(got[0][-1, -1], 0.0)))
