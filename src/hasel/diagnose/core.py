@@ -236,7 +236,10 @@ class DiagnoseOptions:
         read: when the magnitude near the resonance moves (1 dB RMS or more, with the others
         refitted without the load) and the load's set explains at least half of it, the load is
         restarted heavier in both its forms and kept if it passes the backward check's test
-        (:func:`_heavier_restart`) [design: the thresholds are
+        (:func:`_heavier_restart`); and a load added in a later round that passes every test but the
+        share of the nominal gap (``min_nominal_share``, ``near_all_gain``, ``relevant_over_floor``:
+        after a large delay or drift the load is a small share of it) is relevant when the same
+        reading shows its magnitude change [design: the thresholds are
         :func:`hasel.effects.evidence.load_or_delay`'s and the backward check's own; checked on
         ``bench/tune_diag/loads.py``, where a delay fitted first left the load beside it raising the
         resonance and the load was taken out].
@@ -1391,6 +1394,16 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
     held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
+    new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
+    magnitude = None
+    if (not big_enough and rnd > 0 and new_names == ["load_mass"] and opts.load_magnitude_evidence
+            and held_out_ok and gain >= need and dbic < 0 and not _raises(ctx, eff_new)):
+        # a load beside earlier effects that is a small share of the nominal gap (after a large delay or
+        # drift) is relevant when it moves what those cannot: the magnitude near the resonance
+        from hasel.effects.evidence import magnitude_evidence
+
+        magnitude = magnitude_evidence(ctx.pipe, st.current, eff_new, ctx.pipe.den)
+        big_enough = magnitude["shown"]
     # far above the floor the share of what is above it and the share of the whole residual are one figure:
     # a later effect there needs the later rounds' share (min_next_gain), not the floor-side min_gap_share
     far = rnd > 0 and over_floor >= opts.relevant_over_floor
@@ -1399,7 +1412,8 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
-                          "over_floor": over_floor, "accepted": bool(ok)})
+                          "over_floor": over_floor, "accepted": bool(ok)}
+                         | ({"magnitude_evidence": magnitude} if magnitude is not None else {}))
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g} -> "

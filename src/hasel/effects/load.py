@@ -181,9 +181,10 @@ def resonance_signature(freqs_hz: np.ndarray, ratio: np.ndarray, f_res_hz: float
 
 
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    best, best_cost = None, np.inf
-    # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; the better
-    # start is refined in its own form
+    best: dict[str, tuple[float, EffectFit]] = {}
+    # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; each form's
+    # best start is refined and the better refined fit kept (refining only the better start lost a load
+    # whose inertia form needed mu 3.9, beyond the grid, to a delay: combos.py seed 21, case 21)
     grid = (-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.6, 1.0, 2.0)
     for variant, mu in [("model", m) for m in grid] + [("model:zeta", m) for m in grid if m != 0.0]:
         base = _with(effects, EffectFit("load_mass", variant, (mu, 1.0)))
@@ -198,11 +199,11 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         kappa = float(np.clip(np.einsum("i,i->", a, b) / max(sumsq(a), 1e-300), 0.05, 20.0))
         fit = EffectFit("load_mass", variant, (mu, kappa))
         c = _sse(pipe, _with(effects, fit))
-        if c < best_cost:
-            best, best_cost = fit, c
-    assert best is not None
-    fit = _refine(pipe, effects, best, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
-                  x_scale=np.array([0.1, 0.1]))
+        if variant not in best or c < best[variant][0]:
+            best[variant] = (c, fit)
+    refined = [_refine(pipe, effects, f0, np.array([-0.8, 0.05]), np.array([10.0, 20.0]), max_nfev=30,
+                       x_scale=np.array([0.1, 0.1])) for _, f0 in best.values()]
+    fit = min(refined, key=lambda f: _sse(pipe, _with(effects, f)))
     # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
     # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
     # kept when it lowers the training BIC (one more parameter, noise variance unknown)
