@@ -151,23 +151,36 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
-    index = os.path.join(a.out, f"cases_{a.seed}_{a.n}_{a.single}_{a.free}.json")
-    if os.path.exists(index):  # written before with the same draws: the simulation takes minutes
+    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}_{a.n}_{a.single}_{a.free}.json"),
+                          lambda: make(a.out, a.seed, a.n, a.free, a.single)), a.only, a.list)
+    if cases:
+        finish(cases, run(cases, lambda m: (print(m), sys.stdout.flush())), a.out)
+    return 0
+
+
+def cached(index: str, build) -> list[dict]:
+    """The cases listed in ``index`` (JSON) if it was written before with the same draws (the simulation
+    takes minutes), else ``build()``'s, written there."""
+    if os.path.exists(index):
         with open(index) as fh:
-            cases = json.load(fh)
-    else:
-        cases = make(a.out, a.seed, a.n, a.free, a.single)
-        with open(index, "w") as fh:
-            json.dump(cases, fh, indent=1)
-    if a.only:
-        keys = a.only.split(",")
+            return json.load(fh)
+    cases = build()
+    with open(index, "w") as fh:
+        json.dump(cases, fh, indent=1)
+    return cases
+
+
+def select(cases: list[dict], only: str, list_only: bool) -> list[dict]:
+    """The cases whose kind or file name holds one of the comma-separated ``only`` substrings (all when
+    empty); with ``list_only`` their truth is printed and none is returned (nothing to run)."""
+    if only:
+        keys = only.split(",")
         cases = [c for c in cases if any(k in c["kind"] or k in os.path.basename(c["path"]) for k in keys)]
-    if a.list:
+    if list_only:
         for c in cases:
             print(os.path.basename(c["path"]), c["kind"], c["labels"], c["visible"], c["truth"])
-        return 0
-    finish(cases, run(cases, lambda m: (print(m), sys.stdout.flush())), a.out)
-    return 0
+        return []
+    return cases
 
 
 if __name__ == "__main__":

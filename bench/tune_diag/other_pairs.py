@@ -14,7 +14,6 @@ triples apart, in ``DIR/results.json`` too.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
@@ -24,6 +23,7 @@ from hasel_bench import othersim as o
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from cases import finish, run  # noqa: E402
+from combos import cached  # noqa: E402
 
 
 def make(directory: str, seed: int = 5, n_pairs: int = 12, n_triples: int = 6) -> list[dict]:
@@ -51,14 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", default="", help="comma-separated case indices")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
-    index = os.path.join(a.out, f"cases_{a.seed}_{a.pairs}_{a.triples}.json")
-    if os.path.exists(index):
-        with open(index) as fh:
-            cases = json.load(fh)
-    else:
-        cases = make(a.out, a.seed, a.pairs, a.triples)
-        with open(index, "w") as fh:
-            json.dump(cases, fh, indent=1)
+    cases = cached(os.path.join(a.out, f"cases_{a.seed}_{a.pairs}_{a.triples}.json"),
+                   lambda: make(a.out, a.seed, a.pairs, a.triples))
     if a.only:
         keep = {int(x) for x in a.only.split(",")}
         cases = [c for i, c in enumerate(cases) if i in keep]

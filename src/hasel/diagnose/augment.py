@@ -74,8 +74,8 @@ from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonline
                                   monomial, monomials, poly_map, rate_grid, sumsq)
 from hasel.effects.hysteresis import HYST_THRESHOLDS
 from hasel.effects.hysteresis import branch as _branch
-from hasel.effects.load import LOAD_SAG_MIN_MU  # noqa: F401
-from hasel.effects.operators import play, scale_resonances
+from hasel.effects.load import LOAD_SAG_MIN_MU, keeps_zeta, loaded_den  # noqa: F401
+from hasel.effects.operators import play
 from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
 from hasel.effects.saturation import measured_clip, slew_limit
@@ -145,28 +145,21 @@ class Pipeline:
         return float(r.t_s[-1] - r.t_s[0] + self.prep.dt_s)
 
     # -- linear model with load --------------------------------------------------------------
-    def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None) -> LinearSim:
+    def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None,
+               zeta_kept: bool = False) -> LinearSim:
         """The model (``lin``, a re-identified linear part, or the nominal) with ``1 + mu`` times
-        the inertia of its resonances (cached), times the gain ``kappa``."""
+        the inertia of its resonances (``zeta_kept``: their frequency lowered, damping ratio kept;
+        :func:`hasel.effects.load.loaded_den`) (cached), times the gain ``kappa``."""
         base = ("nominal",) if lin is None else lin.theta
-        key = (round(mu, 12),) + base
+        key = (round(mu, 12), bool(zeta_kept) and mu != 0.0) + base
         sim = self._lin.get(key)
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
             if mu == 0.0:
                 sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz, self.prep.sample_offset)
             else:
-                p = np.roots(den)
-                if np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))):
-                    den2 = scale_resonances(den, 1.0 + mu)
-                    den2 = den2 * (den[-1] / den2[-1])
-                else:  # no resonance: the slowest real pole carries the inertia
-                    i = int(np.argmin(np.abs(p.real)))
-                    p2 = p.copy()
-                    p2[i] = p[i] / (1.0 + mu)
-                    den2 = np.real(np.poly(p2)) * den[0]
-                    den2 = den2 * (den[-1] / den2[-1])
-                sim = LinearSim(num, den2, self.prep.rate_hz, self.prep.sample_offset)
+                sim = LinearSim(num, loaded_den(den, mu, zeta_kept=zeta_kept), self.prep.rate_hz,
+                                self.prep.sample_offset)
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim
@@ -178,7 +171,7 @@ class Pipeline:
         """The linear part of the chain for ``effects`` (re-identified model and load included)."""
         f = effects.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
-        return self.loaded(mu, kappa, effects.get(LINEAR))
+        return self.loaded(mu, kappa, effects.get(LINEAR), f is not None and keeps_zeta(f))
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -243,9 +236,10 @@ class Pipeline:
         out["x_eff"] = x
         f = e.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
+        zk = f is not None and keeps_zeta(f)
         lin = e.get(LINEAR)
-        key += ("l", mu, kappa) + (lin.theta if lin is not None else ())
-        sim = self.loaded(mu, kappa, lin)
+        key += ("l", mu, kappa, zk) + (lin.theta if lin is not None else ())
+        sim = self.loaded(mu, kappa, lin, zk)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         if f is not None and len(f.theta) > 2:  # the load's weight: a static offset (a sag)
             key += ("sag",) + f.theta[2:]

@@ -59,6 +59,7 @@ from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
 from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
+from hasel.effects.registry import family
 from hasel.errors import BadInputError, HaselError
 
 __all__ = ["DiagnoseOptions", "Verdict", "DiagnosisFailed", "diagnose", "block_test", "coloured_z"]
@@ -230,6 +231,18 @@ class DiagnoseOptions:
         the first round's best, a load fitted alone, raised the resonance (its mass ratio turned
         positive, 4.2, once the others were in), and without it no first effect passed
         (``bench/tune_diag/RESULT-h-prec.md``).
+    load_magnitude_evidence : bool
+        Before ``load_adds_mass`` takes a raised-resonance load out, the frequency response is
+        read: when the magnitude near the resonance moves (1 dB RMS or more, with the others
+        refitted without the load) and the load's set explains at least half of it, the load is
+        restarted heavier in both its forms and kept if it passes the backward check's test
+        (:func:`_heavier_restart`); and a load added in a later round that passes every test but the
+        share of the nominal gap (``min_nominal_share``, ``near_all_gain``, ``relevant_over_floor``:
+        after a large delay or drift the load is a small share of it) is relevant when the same
+        reading shows its magnitude change [design: the thresholds are
+        :func:`hasel.effects.evidence.load_or_delay`'s and the backward check's own; checked on
+        ``bench/tune_diag/loads.py``, where a delay fitted first left the load beside it raising the
+        resonance and the load was taken out].
     identify : {"auto", "internal", "ident"}
         Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
         else the internal output-error fit [design: "auto" keeps the one whose simulation
@@ -285,6 +298,7 @@ class DiagnoseOptions:
     joint_refine: bool = True
     backward_check: bool = True
     load_adds_mass: bool = True
+    load_magnitude_evidence: bool = True
     joint_refine_nfev: int = 12
     identify: str = "auto"
     target_rate_hz: float | None = None
@@ -319,6 +333,10 @@ class Verdict:
         Every candidate's validation NRMSE per selection round.
     export : dict of ndarray
         ``t_s``, ``measured``, ``nominal``, ``augmented`` over the final held-out samples.
+    notes : list of dict
+        One per named effect with a parameter at a limit of its form (each effect's ``at_bound``
+        lists them): ``name``, ``at_bound``, ``values``, ``note`` (the form may not fit; which
+        experiment would tell).
     """
 
     effects: list[dict]
@@ -336,6 +354,7 @@ class Verdict:
     ambiguous: list = field(default_factory=list)
     noise: dict = field(default_factory=dict)
     test: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
 
     @property
     def names(self) -> list[str]:
@@ -348,7 +367,7 @@ class Verdict:
                 "noise_floor_nrmse": self.noise_floor_nrmse, "model": self.model, "rounds": self.rounds,
                 "working_rate_hz": self.working_rate_hz, "elapsed_s": self.elapsed_s,
                 "timing_offset": self.timing_offset, "dropped": self.dropped, "ambiguous": self.ambiguous,
-                "noise": self.noise, "test": self.test, "usable": True}
+                "noise": self.noise, "test": self.test, "notes": self.notes, "usable": True}
 
 
 def _model_delay(model) -> float:
@@ -1382,6 +1401,16 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
     held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
+    new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
+    magnitude = None
+    if (not big_enough and rnd > 0 and new_names == ["load_mass"] and opts.load_magnitude_evidence
+            and held_out_ok and gain >= need and dbic < 0 and not _raises(ctx, eff_new)):
+        # a load beside earlier effects that is a small share of the nominal gap (after a large delay or
+        # drift) is relevant when it moves what those cannot: the magnitude near the resonance
+        from hasel.effects.evidence import magnitude_evidence
+
+        magnitude = magnitude_evidence(ctx.pipe, st.current, eff_new, ctx.pipe.den)
+        big_enough = magnitude["shown"]
     # far above the floor the share of what is above it and the share of the whole residual are one figure:
     # a later effect there needs the later rounds' share (min_next_gain), not the floor-side min_gap_share
     far = rnd > 0 and over_floor >= opts.relevant_over_floor
@@ -1390,7 +1419,8 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
-                          "over_floor": over_floor, "accepted": bool(ok)})
+                          "over_floor": over_floor, "accepted": bool(ok)}
+                         | ({"magnitude_evidence": magnitude} if magnitude is not None else {}))
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g} -> "
@@ -1614,6 +1644,54 @@ def _gain_without(st: _State, m_ho_r: float) -> float:
     return (m_ho_r - st.mse_ho) / m_ho_r if m_ho_r > 0 else 0.0
 
 
+def _heavier_restart(ctx: _Context, st: _State, rest: dict[str, EffectFit], m_ho_r: float, e_r: np.ndarray
+                     ) -> tuple[dict[str, EffectFit], tuple[float, float, np.ndarray], dict] | None:
+    """A load that raises the resonances beside an earlier effect, restarted on the heavier side, when the
+    frequency response says a load is there; None otherwise (the load is then taken out).
+
+    A delay fitted first takes the phase a lower resonance adds, and the load fitted beside it then
+    *raises* the resonance to give some back (``bench/tune_diag/loads.py`` seed 3: a 28 ms delay beside a
+    resonance 27 % lower, fitted as a 32 ms delay and a mass ratio below 0). A delay moves only the
+    phase, a slow drift nothing near the resonance: when the magnitude near the resonance, with the
+    others (``rest``, refitted without the load) in place, moves by 1 dB or more and the load's set
+    leaves at most half of it (:func:`hasel.effects.evidence.magnitude_evidence`), the load is
+    restarted at mass ratios 0.15, 0.4 and 0.8 in both of its forms and refined jointly with the
+    others (:func:`joint_refine`); the best by training error whose load stays heavier is kept if,
+    like every member in the backward check, it removes ``min_next_gain`` of ``rest``'s validation
+    residual and passes the held-out test (``t_min`` or ``zc_min``). Returns (set, (training mse,
+    validation mse, validation residual), the round's figures)."""
+    from hasel.effects.evidence import magnitude_evidence
+
+    opts = ctx.opts
+    mag = magnitude_evidence(ctx.pipe, rest, st.current, ctx.pipe.den)
+    ctx.say(f"  magnitude near the resonance: {mag['near_db_without']:.2f} dB without the load, "
+            f"{mag['near_db_with']:.2f} dB with it -> {'a load' if mag['shown'] else 'no load shown'}")
+    if not mag["shown"]:
+        return None
+    kappa = st.current["load_mass"].theta[1]
+    best = None
+    for variant in ("model", "model:zeta"):
+        for mu0 in (0.15, 0.4, 0.8):
+            start = dict(rest) | {"load_mass": EffectFit("load_mass", variant, (mu0, kappa))}
+            eff = joint_refine(ctx.pipe, start, max_nfev=opts.joint_refine_nfev)
+            if "load_mass" not in eff or raised_resonance(eff, ctx.pipe.den) or linear_static(ctx.pipe, eff):
+                continue
+            sc = ctx.scores(eff)
+            if best is None or sc[0] < best[1][0]:
+                best = (eff, sc)
+    if best is None:
+        return None
+    gain = (m_ho_r - best[1][1]) / m_ho_r if m_ho_r > 0 else 0.0
+    t_blk, z_col = ctx.held_out(e_r, best[1][2])
+    info = {"near_db_without": mag["near_db_without"], "near_db_with": mag["near_db_with"],
+            "restart_gain": gain, "t_block": t_blk, "z_coloured": z_col}
+    if gain >= opts.min_next_gain and (t_blk >= opts.t_min or z_col >= opts.zc_min):
+        return best[0], best[1], info
+    ctx.say(f"  restarted heavier it removes {100 * gain:.1f} % (block score {t_blk:.1f}, coloured z {z_col:.1f}): "
+            f"not kept")
+    return None
+
+
 def _backward_check(ctx: _Context, st: _State) -> None:
     """Stage: every named effect must pass a later round's acceptance test given all the others, refitted.
 
@@ -1639,12 +1717,23 @@ def _backward_check(ctx: _Context, st: _State) -> None:
         # effects are in. A first effect that raises the resonance is a change of the dynamics the user
         # must see (the DC motor with brake: its identified model's resonance raised, 1.74 -> 0.0088)
         refit, m_tr_r, m_ho_r, e_r = _refit_rest(ctx, _without(st.current, "load_mass"))
-        _backward_round(ctx, st, "load_mass", refit, m_ho_r, False, raised_resonance=True,
-                        mass_ratio=float(st.current["load_mass"].theta[0]))
-        ctx.say(f"load_mass raises the resonances (mass ratio {st.current['load_mass'].theta[0]:.3g}): no added "
-                f"load, taken out (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho_r):.4f})")
-        st.evidence_of.pop("load_mass", None)
-        st.adopt(dict(refit), m_tr_r, m_ho_r, e_r)
+        heavier = _heavier_restart(ctx, st, refit, m_ho_r, e_r) if opts.load_magnitude_evidence else None
+        if heavier is not None:
+            eff_h, (m_tr_h, m_ho_h, e_h), info = heavier
+            _backward_round(ctx, st, "load_mass", refit, m_ho_r, True, raised_resonance=True, heavier_restart=True,
+                            mass_ratio=float(st.current["load_mass"].theta[0]), **info)
+            ctx.say(f"load_mass raises the resonances (mass ratio {st.current['load_mass'].theta[0]:.3g}), but the "
+                    f"magnitude near the resonance moved {info['near_db_without']:.2f} dB (a delay or a drift does not "
+                    f"move it): restarted heavier, mass ratio {eff_h['load_mass'].theta[0]:.3g} (validation NRMSE "
+                    f"{ctx.to_nrmse(m_ho_h):.4f}, {ctx.to_nrmse(m_ho_r):.4f} without the load)")
+            st.adopt(dict(eff_h), m_tr_h, m_ho_h, e_h)
+        else:
+            _backward_round(ctx, st, "load_mass", refit, m_ho_r, False, raised_resonance=True,
+                            mass_ratio=float(st.current["load_mass"].theta[0]))
+            ctx.say(f"load_mass raises the resonances (mass ratio {st.current['load_mass'].theta[0]:.3g}): no added "
+                    f"load, taken out (validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} -> {ctx.to_nrmse(m_ho_r):.4f})")
+            st.evidence_of.pop("load_mass", None)
+            st.adopt(dict(refit), m_tr_r, m_ho_r, e_r)
     if not opts.backward_check:
         return
     direct = {r["best"] for r in st.rounds if r.get("repeat_check") and r.get("accepted")}
@@ -1711,8 +1800,27 @@ def _name_effects(ctx: _Context, st: _State, where: dict, units: tuple[str, str]
                       "credit": {"validation": credit_va, "final": credit_fi,
                                  "note": "share of the nominal model's residual energy that comes back when this "
                                          "effect alone is taken out of the final set (validation / final samples)"},
-                      "n_params": fit.n_params, "theta": list(fit.theta)})
+                      "n_params": fit.n_params, "theta": list(fit.theta),
+                      "at_bound": family(name).at_bound(pipe, fit)})
     return named
+
+
+def bound_notes(ctx: _Context, named: list[dict], current: dict[str, EffectFit]) -> list[dict]:
+    """Stage: one verdict note per named effect with a parameter at a limit of its form (``at_bound``): the
+    refinement wanted to go further than the form allows, so the form may not fit the data; with the
+    experiment that would tell (the family's ``bound_experiment``)."""
+    notes = []
+    for e in named:
+        if not e.get("at_bound"):
+            continue
+        fam, fit = family(e["name"]), current[e["name"]]
+        vals = {k: float(x) for k, x in zip(fam.param_names(fit), fit.theta) if k in e["at_bound"]}
+        text = (f"{e['name']}: {', '.join(e['at_bound'])} at the bound of its range "
+                f"({', '.join(f'{k} = {v:.4g}' for k, v in vals.items())}): "
+                f"the effect's form may not fit the data; to tell: {fam.bound_experiment}")
+        notes.append({"name": e["name"], "at_bound": list(e["at_bound"]), "values": vals, "note": text})
+        ctx.say(f"note: {text}")
+    return notes
 
 
 def _export(ctx: _Context, current: dict[str, EffectFit]) -> dict[str, np.ndarray]:
@@ -1812,6 +1920,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     st.adopt(current, *ctx.scores(current))
     nuisance = _timing_fold(ctx, st, timing)
     named = _name_effects(ctx, st, where, units, nuisance)
+    notes = bound_notes(ctx, named, st.current)
 
     nrmse_aug = ctx.final_nrmse(st.current)
     export = _export(ctx, st.current)
@@ -1824,7 +1933,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     elapsed = time.perf_counter() - t0
     verdict_kw = dict(effects=named, where=where, heldout=heldout_d, noise_floor_nrmse=ctx.floor, model=model_d,
                       rounds=st.rounds, working_rate_hz=prep.rate_hz, elapsed_s=elapsed, timing_offset=timing,
-                      dropped=dropped, ambiguous=st.ambiguous, noise=noise_d,
+                      dropped=dropped, ambiguous=st.ambiguous, noise=noise_d, notes=notes,
                       test={"max_effects": opts.max_effects, "t_min": opts.t_min,
                             "false_alarm_rate": opts.false_alarm_note,
                             "statistic": "held-out block score: paired over the validation blocks with block "

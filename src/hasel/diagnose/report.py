@@ -49,6 +49,8 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
                          f"passed the held-out test")
     for i, e in enumerate(v.effects, 1):
         lines.append(f"{i}. {e['name']} (NRMSE after {e['nrmse_after']:.4f}): {e['evidence']}")
+    for nt in getattr(v, "notes", []) or []:
+        lines.append(f"form may not fit: {nt['note']}")
     for d in getattr(v, "dropped", []) or []:
         lines.append(f"dropped: {d['name']} ({d['reason']}; final held-out NRMSE {d['final_nrmse_with']:.4f} with "
                      f"it, {d['final_nrmse_without']:.4f} without)")

@@ -213,6 +213,17 @@ class AsymmetricFamily(EffectFamily):
         tdom = max(ctx.t_dom, 2 * ctx.prep.dt_s)
         return np.array([0.0, 0.0, -3.0]), np.array([20.0 * tdom, 20.0 * tdom, 3.0])
 
+    def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """The upper time constants and the slope's range (a time constant of zero is a direction without a
+        lag, an ordinary value; a speed limit's bound only keeps it positive)."""
+        lo, hi = self.bounds(ctx, fit)
+        lo = np.full(lo.shape, -np.inf)
+        if fit.variant.startswith("rate_limit"):
+            hi = np.full(hi.shape, np.inf)
+        elif lo.size > 2:
+            lo[2] = -3.0
+        return lo, hi
+
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Time constants (s) and level slope, or the direction and speed limit (output unit per second)."""

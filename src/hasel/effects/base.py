@@ -34,8 +34,12 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-__all__ = ["SLOTS", "Effect", "EffectFit", "Stage", "Scales", "FitContext", "EffectFamily", "LINEAR", "SLOT_ORDER",
+__all__ = ["AT_BOUND_REL_TOL", "SLOTS", "Effect", "EffectFit", "Stage", "Scales", "FitContext", "EffectFamily", "LINEAR", "SLOT_ORDER",
            "run_chunked"]
+
+#: A fitted parameter within this share of its range of a limit of the form is reported as at that bound
+#: (:meth:`EffectFamily.at_bound`): the refinements stop at the bound itself, or within their tolerance of it.
+AT_BOUND_REL_TOL = 1e-3
 
 #: The three places an effect can act, in chain order.
 SLOTS = ("input", "dynamics", "output")
@@ -177,6 +181,9 @@ class EffectFamily(ABC):
     warm_start: ClassVar[bool] = False
     #: The truth form's dataclass.
     truth_class: ClassVar[type[Effect]] = Effect
+    #: The experiment that would tell whether the form fits when a parameter is pinned at a limit of it.
+    bound_experiment: ClassVar[str] = ("a log over another band, amplitude or rate, where the effect's form can "
+                                       "be checked against another one")
 
     # -- parameters -----------------------------------------------------------------------
     @abstractmethod
@@ -214,6 +221,30 @@ class EffectFamily(ABC):
         """Lower and upper bounds of ``fit.theta`` (for refinement; default: free)."""
         inf = np.full(fit.n_params, np.inf)
         return -inf, inf
+
+    def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds of ``fit.theta`` that are limits of the family's *form* (default: :meth:`bounds`): a fit
+        pinned at one says the form may not fit the data. A family whose bounds are also ordinary values
+        (non-negative weights of which some are zero, a start branch of -1 or 1) returns infinities there."""
+        return self.bounds(ctx, fit)
+
+    def at_bound(self, ctx: FitContext, fit: EffectFit, rel_tol: float = AT_BOUND_REL_TOL) -> list[str]:
+        """Names of ``fit.theta``'s entries at (or within ``rel_tol`` of the range between) a limit of
+        :meth:`form_limits`. With a one-sided range the tolerance is ``rel_tol`` of the bound's size (only
+        an exact pin at a bound of zero), plus 1e-12 (units of the parameter)."""
+        lo, hi = (np.broadcast_to(np.asarray(b, float), (len(fit.theta),)) for b in self.form_limits(ctx, fit))
+        names = self.param_names(fit)
+        out = []
+        for j, x in enumerate(fit.theta):
+            span = hi[j] - lo[j]
+            for b in (lo[j], hi[j]):
+                if not np.isfinite(b):
+                    continue
+                tol = rel_tol * (span if np.isfinite(span) else abs(b)) + 1e-12
+                if abs(float(x) - b) <= tol:
+                    out.append(names[j] if j < len(names) else f"theta_{j}")
+                    break
+        return out
 
     def refine_from(self, ctx: FitContext, effects: dict[str, EffectFit], init: EffectFit) -> EffectFit | None:
         """A warm-started fit from ``init``: a bounded refinement (10 evaluations) for the families

@@ -101,6 +101,8 @@ class DelayFamily(EffectFamily):
     slot = "input"
     variants = ("input",)
     truth_class = TimeDelay
+    bound_experiment = ("a step or a sweep at a higher rate: a pure delay shifts the phase linearly in frequency with "
+                        "the magnitude unchanged, another lag does not")
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("delay_s",)``."""

@@ -236,6 +236,8 @@ class DriftFamily(EffectFamily):
     slot = "output"
     variants = ("output",)
     truth_class = ChargeDrift
+    bound_experiment = ("a longer log with a held voltage and a rest at zero: the drift's time course shows whether it "
+                        "creeps and recovers as a charge would")
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("tau_s", "gain_per_charge", "offset_per_charge")`` (charge in input half-ranges)."""

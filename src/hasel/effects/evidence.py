@@ -14,7 +14,7 @@ from scipy import signal
 
 from hasel.effects.base import EffectFit, FitContext
 
-__all__ = ["response_ratio", "resonance_hz", "load_or_delay"]
+__all__ = ["response_ratio", "resonance_hz", "load_or_delay", "magnitude_evidence"]
 
 
 def response_ratio(ctx: FitContext, effects: dict[str, EffectFit], min_coherence: float = 0.9,
@@ -96,3 +96,28 @@ def load_or_delay(ctx: FitContext, effects: dict[str, EffectFit], den) -> dict:
     else:
         fav = "unclear"
     return {"favours": fav, "n_bins": int(f.size), "band_hz": [float(f[0]), float(f[-1])], "delay": ph, "load": ld}
+
+
+def magnitude_evidence(ctx: FitContext, without: dict[str, EffectFit], with_: dict[str, EffectFit], den,
+                       min_db: float = 1.0, explained: float = 0.5) -> dict:
+    """Whether the magnitude near the resonance shows a load: the measured-over-model magnitude within an
+    octave of the resonance of ``den`` (RMS, dB) moves by at least ``min_db`` with the model ``without``
+    the load, and the model ``with_`` it leaves at most ``explained`` of that (:func:`response_ratio`,
+    :func:`hasel.effects.load.resonance_signature`). A delay moves only the phase and a slow drift
+    nothing near the resonance, so a load that a delay or a drift would otherwise replace keeps its
+    place when this holds. ``min_db`` is :func:`load_or_delay`'s threshold for a load's reading.
+
+    Returns ``{"near_db_without", "near_db_with", "n_bins", "shown"}``."""
+    from hasel.effects.load import resonance_signature
+
+    fres = resonance_hz(den)
+    f0, r0 = response_ratio(ctx, without)
+    f1, r1 = response_ratio(ctx, with_)
+    if not np.isfinite(fres) or f0.size < 4 or f1.size < 4:
+        return {"near_db_without": float("nan"), "near_db_with": float("nan"), "n_bins": int(min(f0.size, f1.size)),
+                "shown": False}
+    a = resonance_signature(f0, r0, fres)["magnitude_near_resonance_rms_db"]
+    b = resonance_signature(f1, r1, fres)["magnitude_near_resonance_rms_db"]
+    shown = bool(np.isfinite(a) and np.isfinite(b) and a >= min_db and b <= explained * a)
+    return {"near_db_without": float(a), "near_db_with": float(b), "n_bins": int(min(f0.size, f1.size)),
+            "shown": shown}

@@ -192,6 +192,11 @@ class HysteresisFamily(EffectFamily):
             lo[len(HYST_THRESHOLDS)], hi[len(HYST_THRESHOLDS)] = -1.0, 1.0
         return lo, hi
 
+    def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """None: a weight of zero is an unused play, a branch of -1 or 1 a start on a branch (ordinary values)."""
+        inf = np.full(fit.n_params, np.inf)
+        return -inf, inf
+
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Thresholds, weights, the loop's half-width (input unit) and the starting branch."""
