@@ -251,7 +251,9 @@ def _run(cmd: Command, args: argparse.Namespace, debug: bool) -> int:
         if unavailable is not None:
             raise unavailable
         check_outputs(args, cmd.outputs)
-        return int(_resolve(cmd.target)(args) or 0)
+        code = int(_resolve(cmd.target)(args) or 0)
+        interrupt.check()  # a stop whose raise Python swallowed (see interrupt.check) still ends the command
+        return code
     except interrupt.Interrupted as stop:
         sys.stderr.write(f"{name}: {stop}; files closed\n")
         return stop.exit_code

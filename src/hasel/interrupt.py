@@ -61,7 +61,9 @@ def install() -> dict[int, object]:
     previous: dict[int, object] = {}
     if threading.current_thread() is not threading.main_thread():
         return previous
-    _state["signum"] = 0
+    if signal.getsignal(signal.SIGTERM) is not _handler:
+        # a fresh command; a nested one (the demo runs `hasel diagnose` in-process) keeps a pending stop
+        _state["signum"] = 0
     for name in HANDLED:
         sig = getattr(signal, name, None)
         if sig is None:
@@ -84,7 +86,12 @@ def requested() -> int:
 
 
 def check() -> None:
-    """Raise :class:`Interrupted` if a stop signal has arrived."""
+    """Raise :class:`Interrupted` if a stop signal has arrived.
+
+    Also the safety net for a raise that was lost: a signal that lands while Python runs a callback
+    whose exceptions it only prints (an at-fork hook as the diagnosis starts its worker processes,
+    a ``__del__``) is recorded but does not stop the command; the command line checks once more
+    before it reports success."""
     if _state["signum"]:
         raise Interrupted(_state["signum"])
 
