@@ -24,6 +24,8 @@ import os
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
+from hasel import interrupt
+
 __all__ = ["pmap", "jobs", "set_jobs", "available_cores"]
 
 T = TypeVar("T")
@@ -76,6 +78,9 @@ def pmap(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     pickle. Items are handed out one at a time in order, so put the slowest first. An
     exception in a task is raised here, as a serial loop would raise it.
     """
+    # a stop whose raise was lost in a fork's at-fork hook (only printed by Python) ends the run here,
+    # at the next map, instead of after the whole diagnosis
+    interrupt.check()
     items = list(items)
     n = min(jobs(), len(items))
     if (n <= 1 or _state["in_worker"] or multiprocessing.current_process().daemon
