@@ -57,6 +57,9 @@ Figures (each measured against its baseline in the same run where one exists):
 9. Identification and diagnosis on the verification corpus (``bench/verify``, written
    without reading the analysis code; no threshold tuned on it): generated from its
    seed, scored black-box by its own scorer; the issue's figures per corpus.
+10. The same on a second verification corpus (``bench/verify2``, session 9: another author
+   with its own simulator and effect forms, 103 cases; about 50 min with 2 jobs on 2 cores;
+   ``--quick`` scores three of its cases).
 
 Executors, and why:
 
@@ -108,7 +111,8 @@ __all__ = ["add_arguments", "run", "Row", "format_table", "FIGURES"]
 #: Figure numbers and what they measure (``--only`` takes the numbers).
 FIGURES = {1: "graph in simulated time", 2: "offline core loop", 3: "real time 200 Hz",
            4: "scale", 5: "identification and recording", 6: "diagnosis blind check",
-           7: "200 Hz under load", 8: "loader fuzzing", 9: "verification corpus (untuned)"}
+           7: "200 Hz under load", 8: "loader fuzzing", 9: "verification corpus (untuned)",
+           10: "second verification corpus (untuned, another author)"}
 
 
 @dataclass
@@ -539,6 +543,66 @@ def _fig9(b: _Bench) -> None:
                   "-", None, "<= 5 %", ot["rejected_at_0.05"] <= 0.05 * ot["n"])
 
 
+def _quick_cases(labels: Path) -> str:
+    """A smoke subset of the second corpus: one effect-free log, one single effect, one identification log."""
+    ids = sorted(f.stem for f in labels.glob("*.json"))
+    pick = [next(i for i in ids if i.startswith(p)) for p in ("free_", "single_", "id_")]
+    return ",".join(pick)
+
+
+def _fig10(b: _Bench) -> None:
+    """Identification and diagnosis on the second verification corpus (``bench/verify2``: another author,
+    its own simulator and effect forms, seed 2), on which no threshold was tuned; scored black-box by its
+    own scorer. ``--quick`` scores three of its cases."""
+    here = Path(__file__).resolve().parents[1] / "verify2"
+    if not (here / "score.py").is_file():
+        raise FileNotFoundError(f"the second verification corpus's scripts are not at {here}")
+    hasel = Path(sys.executable).with_name("hasel")
+    with tempfile.TemporaryDirectory(prefix="hasel-verify2-") as tmp:
+        b.say("10: generating the second verification corpus (about 4 min, 240 MB)")
+        subprocess.run([sys.executable, str(here / "gen.py"), "--out", tmp], check=True, stdout=subprocess.DEVNULL)
+        only = ["--cases", _quick_cases(Path(tmp, "labels"))] if b.quick else []
+        b.say(f"10: scoring it black-box (2 jobs{', a 3-case subset' if b.quick else ''})")
+        out = Path(tmp, "score", "score.json")
+        out.parent.mkdir()
+        subprocess.run([sys.executable, str(here / "score.py"), "--corpus", tmp, "--hasel", str(hasel),
+                        "--jobs", "2", "--json", str(out), *only], check=True, stdout=subprocess.DEVNULL)
+        s = json.loads(out.read_text())["summary"]
+        b.reports.append("second verification corpus (untuned):\n" + out.with_suffix(".md").read_text())
+    b.results["10_verify2"] = s
+
+    def frac(a, n):
+        return f"{a}/{n}" if n else "-"
+
+    if "singles" in s:
+        sg, ef, nf, sh, w = s["singles"], s["effect_free"], s["near_floor"], s["shrink_effect_cases"], s["worse_unflagged"]
+        b.row("10 verify2: single effects top-1", frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
+              None if not sg["n"] else sg["top1"] >= 0.95 * sg["n"])
+        for cat in ("pairs", "triples"):
+            c = s[cat]
+            ok = None if c["recall"] is None or c["precision"] is None else c["recall"] >= 0.85 and c["precision"] >= 0.90
+            b.row(f"10 verify2: {cat} recall / precision", f"{_f2(c['recall'])} / {_f2(c['precision'])}", "-", None,
+                  ">= 0.85 / 0.90", ok)
+        b.row("10 verify2: effect-free logs with no effect named", frac(ef["no_effect_named"], ef["n"]), "-", None,
+              ">= 95 %", None if not ef["n"] else ef["no_effect_named"] >= 0.95 * ef["n"])
+        b.row("10 verify2: near-floor false attributions", frac(nf["false_attributions"], nf["n"]), "-", None, "0",
+              None if not nf["n"] else nf["false_attributions"] == 0)
+        b.row("10 verify2: held-out shrink median / worst; worse, unflagged",
+              f"{_f2(sh.get('median'))} / {_f2(sh.get('min'))}; {w['n']}", "-", None, ">= 0.80; 0",
+              None if sh.get("median") is None else sh["median"] >= 0.80 and w["n"] == 0)
+        ds = s["diagnose_seconds"]
+        b.row("10 verify2: seconds per diagnosis, median / max", f"{ds['median']:.1f} / {ds['max']:.1f}", "-", None,
+              "-", None)
+    if "ident" in s:
+        i = s["ident"]
+        b.row("10 verify2: identify exit 0 and within 1 dB / 5 deg (0.1-15 Hz)", frac(i["exit0_within_tol"], i["n"]),
+              "-", None, "all", i["exit0_within_tol"] == i["n"])
+        b.row("10 verify2: offset test false rejections", frac(len(i["dependence_false_rejections"]),
+                                                                 i["dependence_tested"]), "-", None, "<= 5 %",
+              None if not i["dependence_tested"] else
+              len(i["dependence_false_rejections"]) <= 0.05 * i["dependence_tested"])
+
+
 def _f2(x: float | None) -> str:
     """A share or ratio with two decimals, "-" when there is none."""
     return "-" if x is None else f"{x:.2f}"
@@ -592,7 +656,7 @@ def _fig8(b: _Bench) -> None:
 
 
 _RUNNERS: dict[int, Callable[[_Bench], None]] = {1: _fig1, 2: _fig2, 3: _fig3, 4: _fig4, 5: _fig5, 6: _fig6,
-                                                  7: _fig7, 8: _fig8, 9: _fig9}
+                                                  7: _fig7, 8: _fig8, 9: _fig9, 10: _fig10}
 
 
 def _parse_only(text: str) -> list[int]:
