@@ -110,17 +110,17 @@ def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: b
         return den.copy()
     p = np.roots(den)
     cplx = np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))
-    if np.any(cplx) and zeta_kept:
-        p2 = np.where(cplx, p / math.sqrt(1.0 + mu), p)
-        den2 = np.real(np.poly(p2)) * den[0]
-    elif np.any(cplx):
+    if np.any(cplx) and not zeta_kept:
         den2 = scale_resonances(den, 1.0 + mu)
         if not rescale:
             return den2
-    else:  # no resonance: the slowest real pole carries the inertia
-        i = int(np.argmin(np.abs(p.real)))
+    else:
         p2 = p.copy()
-        p2[i] = p[i] / (1.0 + mu)
+        if np.any(cplx):  # the damping ratio kept: the complex poles move in, along their rays
+            p2[cplx] = p[cplx] / math.sqrt(1.0 + mu)
+        else:  # no resonance: the slowest real pole carries the inertia
+            i = int(np.argmin(np.abs(p.real)))
+            p2[i] = p[i] / (1.0 + mu)
         den2 = np.real(np.poly(p2)) * den[0]
     return den2 * (den[-1] / den2[-1])
 
