@@ -58,6 +58,7 @@ from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
+from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
 from hasel.effects.registry import family
 from hasel.errors import BadInputError, HaselError
@@ -1407,8 +1408,6 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
             and held_out_ok and gain >= need and dbic < 0 and not _raises(ctx, eff_new)):
         # a load beside earlier effects that is a small share of the nominal gap (after a large delay or
         # drift) is relevant when it moves what those cannot: the magnitude near the resonance
-        from hasel.effects.evidence import magnitude_evidence
-
         magnitude = magnitude_evidence(ctx.pipe, st.current, eff_new, ctx.pipe.den)
         big_enough = magnitude["shown"]
     # far above the floor the share of what is above it and the share of the whole residual are one figure:
@@ -1660,8 +1659,6 @@ def _heavier_restart(ctx: _Context, st: _State, rest: dict[str, EffectFit], m_ho
     like every member in the backward check, it removes ``min_next_gain`` of ``rest``'s validation
     residual and passes the held-out test (``t_min`` or ``zc_min``). Returns (set, (training mse,
     validation mse, validation residual), the round's figures)."""
-    from hasel.effects.evidence import magnitude_evidence
-
     opts = ctx.opts
     mag = magnitude_evidence(ctx.pipe, rest, st.current, ctx.pipe.den)
     ctx.say(f"  magnitude near the resonance: {mag['near_db_without']:.2f} dB without the load, "
