@@ -511,13 +511,10 @@ def _fig9(b: _Bench) -> None:
         b.reports.append("verification corpus (untuned):\n" + Path(tmp, "score.md").read_text())
     b.results["9_verify"] = s
 
-    def frac(a, n):
-        return f"{a}/{n}" if n else "-"
-
     d, i = s.get("diagnose", {}), s.get("ident", {})
     if d:
         sg, m, ef, nf, sh = d["single"], d["multi"], d["effect_free"], d["near_floor"], d["shrink"]
-        b.row("9 verify: single effects top-1", frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
+        b.row("9 verify: single effects top-1", _frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
               None if not sg["n"] else sg["top1"] >= 0.95 * sg["n"])
         for cat in ("pair", "triple"):
             mc = m[cat]
@@ -525,9 +522,9 @@ def _fig9(b: _Bench) -> None:
                 mc["recall"] >= 0.85 and mc["precision"] >= 0.90)
             b.row(f"9 verify: {cat}s recall / precision", f"{_f2(mc['recall'])} / {_f2(mc['precision'])}",
                   "-", None, ">= 0.85 / 0.90", ok)
-        b.row("9 verify: effect-free logs with no effect named", frac(ef["n"] - ef["false_alarms"], ef["n"]),
+        b.row("9 verify: effect-free logs with no effect named", _frac(ef["n"] - ef["false_alarms"], ef["n"]),
               "-", None, ">= 95 %", None if not ef["n"] else ef["false_alarms"] <= 0.05 * ef["n"])
-        b.row("9 verify: near-floor false attributions", frac(nf["false_attributions"], nf["n"]), "-", None, "-", None)
+        b.row("9 verify: near-floor false attributions", _frac(nf["false_attributions"], nf["n"]), "-", None, "-", None)
         w = d["worse_than_nominal"]
         b.row("9 verify: held-out shrink median / worst; worse, unflagged",
               f"{_f2(sh['median'])} / {_f2(sh['worst'])}; {w['n'] - w['flagged']}", "-", None, ">= 0.80; 0",
@@ -536,10 +533,10 @@ def _fig9(b: _Bench) -> None:
               f"{d['seconds']['median']:.1f} / {d['seconds']['max']:.1f}", "-", None, "-", None)
     if i:
         ot = i.get("offset_test", {})
-        b.row("9 verify: identify within 1 dB / 5 deg (0.1-15 Hz)", frac(i["within_1db_5deg"], i["n"]), "-", None,
+        b.row("9 verify: identify within 1 dB / 5 deg (0.1-15 Hz)", _frac(i["within_1db_5deg"], i["n"]), "-", None,
               "all", i["within_1db_5deg"] == i["n"])
         if ot.get("n"):
-            b.row("9 verify: offset test false rejections at p = 0.05", frac(ot["rejected_at_0.05"], ot["n"]),
+            b.row("9 verify: offset test false rejections at p = 0.05", _frac(ot["rejected_at_0.05"], ot["n"]),
                   "-", None, "<= 5 %", ot["rejected_at_0.05"] <= 0.05 * ot["n"])
 
 
@@ -571,21 +568,18 @@ def _fig10(b: _Bench) -> None:
         b.reports.append("second verification corpus (untuned):\n" + out.with_suffix(".md").read_text())
     b.results["10_verify2"] = s
 
-    def frac(a, n):
-        return f"{a}/{n}" if n else "-"
-
     if "singles" in s:
         sg, ef, nf, sh, w = s["singles"], s["effect_free"], s["near_floor"], s["shrink_effect_cases"], s["worse_unflagged"]
-        b.row("10 verify2: single effects top-1", frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
+        b.row("10 verify2: single effects top-1", _frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
               None if not sg["n"] else sg["top1"] >= 0.95 * sg["n"])
         for cat in ("pairs", "triples"):
             c = s[cat]
             ok = None if c["recall"] is None or c["precision"] is None else c["recall"] >= 0.85 and c["precision"] >= 0.90
             b.row(f"10 verify2: {cat} recall / precision", f"{_f2(c['recall'])} / {_f2(c['precision'])}", "-", None,
                   ">= 0.85 / 0.90", ok)
-        b.row("10 verify2: effect-free logs with no effect named", frac(ef["no_effect_named"], ef["n"]), "-", None,
+        b.row("10 verify2: effect-free logs with no effect named", _frac(ef["no_effect_named"], ef["n"]), "-", None,
               ">= 95 %", None if not ef["n"] else ef["no_effect_named"] >= 0.95 * ef["n"])
-        b.row("10 verify2: near-floor false attributions", frac(nf["false_attributions"], nf["n"]), "-", None, "0",
+        b.row("10 verify2: near-floor false attributions", _frac(nf["false_attributions"], nf["n"]), "-", None, "0",
               None if not nf["n"] else nf["false_attributions"] == 0)
         b.row("10 verify2: held-out shrink median / worst; worse, unflagged",
               f"{_f2(sh.get('median'))} / {_f2(sh.get('min'))}; {w['n']}", "-", None, ">= 0.80; 0",
@@ -595,12 +589,17 @@ def _fig10(b: _Bench) -> None:
               "-", None)
     if "ident" in s:
         i = s["ident"]
-        b.row("10 verify2: identify exit 0 and within 1 dB / 5 deg (0.1-15 Hz)", frac(i["exit0_within_tol"], i["n"]),
+        b.row("10 verify2: identify exit 0 and within 1 dB / 5 deg (0.1-15 Hz)", _frac(i["exit0_within_tol"], i["n"]),
               "-", None, "all", i["exit0_within_tol"] == i["n"])
-        b.row("10 verify2: offset test false rejections", frac(len(i["dependence_false_rejections"]),
+        b.row("10 verify2: offset test false rejections", _frac(len(i["dependence_false_rejections"]),
                                                                  i["dependence_tested"]), "-", None, "<= 5 %",
               None if not i["dependence_tested"] else
               len(i["dependence_false_rejections"]) <= 0.05 * i["dependence_tested"])
+
+
+def _frac(a: int, n: int) -> str:
+    """``a/n`` as counted, "-" when there is nothing to count."""
+    return f"{a}/{n}" if n else "-"
 
 
 def _f2(x: float | None) -> str:
