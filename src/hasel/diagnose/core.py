@@ -54,6 +54,7 @@ from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
                                     fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
+from hasel.diagnose.nominal import scale_check
 from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
@@ -970,9 +971,36 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
             say(f"the output piles up on {', '.join(f'{v:.4g}' for v, _ in clips.values())} "
                 f"({int(at.sum())} samples, a clip): identifying without them")
         num, den, source = _identify(prep_id, opts, say)
+    else:
+        _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
     clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
     timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
     return num, den, source, timing, clips
+
+
+def _gain_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float, say) -> dict:
+    """Stage: refuse a given model whose gain or sign contradicts the log (:mod:`hasel.diagnose.nominal`).
+
+    Raises :class:`DiagnosisFailed` (exit 1, ``usable: false``) before any effect is fitted: a
+    units or sign error would otherwise be "explained" by a map or a sensor curve."""
+    from hasel.diagnose.prep import LinearSim
+
+    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset)
+    hs = [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
+          for r in prep.records]
+    g = scale_check([r.y for r in prep.records], hs, [r.train for r in prep.records], den, prep.rate_hz)
+    if g["checked"]:
+        say(f"nominal scale below {g['cutoff_hz']:.3g} Hz on the training samples: {g['scale']:.4g} "
+            f"(1 = the model's gain)")
+    else:
+        say(f"nominal scale not checked: {100 * g['low_share']:.1f} % of the simulation's variance below "
+            f"{g['cutoff_hz']:.3g} Hz")
+    if not g["ok"]:
+        raise DiagnosisFailed(g["reason"] + ": fix the model or the log's units, or identify a model from this "
+                              "rig (hasel identify)",
+                              {"usable": False, "reasons": [g["reason"]], "nominal_scale": g["scale"],
+                               "effects": [], "dropped": [], "ambiguous": []})
+    return g
 
 
 def _noise_stage(prep: Prepared, pipe: Pipeline, clips: dict) -> tuple[float, str, dict, dict, dict]:
