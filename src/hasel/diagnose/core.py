@@ -972,7 +972,8 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
                 f"({int(at.sum())} samples, a clip): identifying without them")
         num, den, source = _identify(prep_id, opts, say)
     else:
-        _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
+        g = _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
+        source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "cutoff_hz", "low_share")}}
     clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
     timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
     return num, den, source, timing, clips
@@ -1969,8 +1970,15 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
                   f"the output's mean) and {nrmse_aug:.3g} with the effects")
         payload = Verdict(**verdict_kw).to_json()
         payload.update({"usable": False, "reasons": [reason]})
-        raise DiagnosisFailed(reason + ": check the model's units and signs, or identify one from a log "
-                              "with steps and a sweep through the band", payload)
+        sc = source.get("nominal_scale") or {}
+        if sc.get("checked"):
+            # units and sign agree at low frequency: the gap is in the dynamics or an effect the library lacks
+            hint = (f"its gain and sign agree with the log below {sc['cutoff_hz']:.3g} Hz (scale {sc['scale']:.3g}), "
+                    f"so the gap is in the band's dynamics or an effect no family here explains: identify a model "
+                    f"from this rig (hasel identify) and diagnose against it, or log a sweep through the band")
+        else:
+            hint = "check the model's units and signs, or identify one from a log with steps and a sweep through the band"
+        raise DiagnosisFailed(reason + ": " + hint, payload)
     say(f"done in {elapsed:.1f} s: {', '.join(e['name'] for e in named) or 'no effect'}; final held-out NRMSE "
         f"{nrmse_nom:.4f} -> {nrmse_aug:.4f} (floor {ctx.floor:.4f})")
     plots = {"arrays": arrays, "pipe": pipe, "current": st.current}
