@@ -54,7 +54,7 @@ from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
                                     fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
-from hasel.diagnose.nominal import scale_check
+from hasel.diagnose.nominal import BAND_RATIO, scale_check
 from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
@@ -973,7 +973,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
         num, den, source = _identify(prep_id, opts, say)
     else:
         g = _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
-        source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "cutoff_hz", "low_share")}}
+        source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "cutoff_hz", "band_share")}}
     clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
     timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
     return num, den, source, timing, clips
@@ -990,12 +990,11 @@ def _gain_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float
     hs = [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
           for r in prep.records]
     g = scale_check([r.y for r in prep.records], hs, [r.train for r in prep.records], den, prep.rate_hz)
+    band = f"{g['cutoff_hz'] / BAND_RATIO:.3g}-{g['cutoff_hz']:.3g} Hz"
     if g["checked"]:
-        say(f"nominal scale below {g['cutoff_hz']:.3g} Hz on the training samples: {g['scale']:.4g} "
-            f"(1 = the model's gain)")
+        say(f"nominal scale in {band} on the training samples: {g['scale']:.4g} (1 = the model's gain)")
     else:
-        say(f"nominal scale not checked: {100 * g['low_share']:.1f} % of the simulation's variance below "
-            f"{g['cutoff_hz']:.3g} Hz")
+        say(f"nominal scale not checked: {100 * g['band_share']:.1f} % of the simulation's variance in {band}")
     if not g["ok"]:
         raise DiagnosisFailed(g["reason"] + ": fix the model or the log's units, or identify a model from this "
                               "rig (hasel identify)",
@@ -1973,7 +1972,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         sc = source.get("nominal_scale") or {}
         if sc.get("checked"):
             # units and sign agree at low frequency: the gap is in the dynamics or an effect the library lacks
-            hint = (f"its gain and sign agree with the log below {sc['cutoff_hz']:.3g} Hz (scale {sc['scale']:.3g}), "
+            hint = (f"its gain and sign agree with the log at {sc['cutoff_hz'] / BAND_RATIO:.3g}-{sc['cutoff_hz']:.3g} "
+                    f"Hz (scale {sc['scale']:.3g}), "
                     f"so the gap is in the band's dynamics or an effect no family here explains: identify a model "
                     f"from this rig (hasel identify) and diagnose against it, or log a sweep through the band")
         else:
