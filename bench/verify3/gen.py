@@ -200,16 +200,16 @@ FORMS = {
     "drift_trap": ("charge_drift", [], lambda ts, s: _pieces(
         drift=P.Drift(ts, "trap", k=0.02 * s), params=dict(k=0.02 * s, v_th=2.5, tau=60.0, c=1.5))),
     "delay_pure": ("time_delay", [], lambda ts, s: _pieces(
-        delay=0.0073 * s, params=dict(delay_s=0.0073 * s))),
+        delay=0.0093 * s, params=dict(delay_s=0.0093 * s))),
     "delay_mixed": ("time_delay", [], lambda ts, s: _pieces(
-        delay=0.0025 * s, lag=0.006 * s, params=dict(delay_s=0.0025 * s, lag_s=0.006 * s))),
+        delay=0.004 * s, lag=0.008 * s, params=dict(delay_s=0.004 * s, lag_s=0.008 * s))),
     "load_mass": ("load_mass", [], lambda ts, s: _pieces(
-        tf=P.loaded_tf(0.647 * s, 2), params=dict(mu=0.647 * s, pairs=2))),
+        tf=P.loaded_tf(1.5 * s, 2), params=dict(mu=1.5 * s, pairs=2))),
     "load_third": ("load_mass", [], lambda ts, s: _pieces(
         tf=P.third_pair_tf(31.0 / math.sqrt(s), 0.22),
         params=dict(f_hz=31.0 / math.sqrt(s), zeta=0.22))),
     "load_onepair": ("load_mass", [], lambda ts, s: _pieces(
-        tf=P.loaded_tf(1.0 * s, 1), params=dict(mu=1.0 * s, pairs=1))),
+        tf=P.loaded_tf(2.5 * s, 1), params=dict(mu=2.5 * s, pairs=1))),
 }
 
 
@@ -392,8 +392,8 @@ def case_table():
         ("asym_chargelag", "prbs", 1000, "steps_s"), ("asym_relax", "rlev", 1000, "ms1s"),
         ("asym_slew", "lin2", 500, "rlev_s"),
         ("drift_leaky", "paper1x2_pre", 200, "steps_s"), ("drift_trap", "steps", 1000, "rlev_s"),
-        ("delay_pure", "log2", 1000, "steps_s"), ("delay_mixed", "ms3", 200, "rlev_s"),
-        ("load_mass", "lin2", 1000, "rlev_s"), ("load_third", "prbs", 2000, "ms1s"),
+        ("delay_pure", "log2", 1000, "steps_s"), ("delay_mixed", "prbs_hi", 200, "rlev_s"),
+        ("load_mass", "paper1x2", 1000, "rlev_s"), ("load_third", "prbs", 2000, "ms1s"),
     ]
     for i, (f, d, fs, h) in enumerate(singles, 1):
         add(f"si{i:02d}", "diagnose", "single", d, fs, forms=[f], held=h)
@@ -416,9 +416,9 @@ def case_table():
 
     # ---------------- pairs (8)
     pairs = [
-        (["stat_twoslope", "delay_pure"], "ms3", 1000, "rlev_s"),
+        (["stat_twoslope", "delay_pure"], "lin4", 1000, "rlev_s"),
         (["hyst_asympi", "sens_sqrt"], "rlev", 500, "steps_s"),
-        (["load_mass", "drift_trap"], "steps", 1000, "rlev_s"),
+        (["load_mass", "drift_trap"], "prbs_hi", 1000, "steps_s"),
         (["sat_tanhstop", "asym_chargelag"], "paper1x2", 1000, "steps_s"),
         (["sens_quad", "delay_mixed"], "lin4", 200, "rlev_s"),
         (["hyst_boucwen", "load_third"], "prbs_hi", 2000, "ms1s"),
@@ -433,7 +433,7 @@ def case_table():
         (["stat_twoslope", "load_mass", "drift_leaky"], "mix_rlev_ms", 1000, "steps_s"),
         (["hyst_boucwen", "delay_pure", "sens_quad"], "paper1x3", 500, "rlev_s"),
         (["asym_slew", "sat_tanhstop", "load_onepair"], "rlev", 1000, "ms1s"),
-        (["stat_ripple", "asym_relax", "delay_mixed"], "ms3", 200, "rlev_s"),
+        (["stat_ripple", "asym_relax", "delay_mixed"], "paper1x2", 200, "rlev_s"),
         (["sens_sqrt", "hyst_outplay", "drift_trap"], "steps", 1000, "mix_rlev_ms"),
     ]
     for i, (fo, d, fs, h) in enumerate(triples, 1):
@@ -510,6 +510,10 @@ def gen_case(out, case, seed, mcap=True):
         ratio = effect_rms(case, base_seed, strength) / sigma
     elif case["forms"] and not case.get("cl"):
         ratio = effect_rms(case, base_seed, None) / 0.01
+    each = None
+    if case["forms"] and not case.get("cl"):
+        each = {f: effect_rms(dict(case, forms=[f]), base_seed, strength) / 0.01
+                for f in case["forms"]}
     rng = np.random.default_rng(base_seed)
     t, v, y, meta = simulate(case, "train", rng, strength)
     write_log(os.path.join(cdir, "train"), t, v, y, mcap)
@@ -535,7 +539,7 @@ def gen_case(out, case, seed, mcap=True):
                  design=case["design"], heldout=held, n=len(t), dur_s=float(len(t) / case["fs"]),
                  convention=case.get("conv", "zoh"), skew_samples=case.get("skew", 0.0),
                  closed_loop=bool(case.get("cl")), noise=meta["noise"], effects=meta["labels"],
-                 effect_rms_over_white_sigma=ratio, format=fmt, seed=seed,
+                 effect_rms_over_white_sigma=ratio, each_effect_rms_over_0p01mm=each, format=fmt, seed=seed,
                  chirp_formula=("paper (3)-(5): f(t)=(ff-f0)/ttot*t, sweeps to 2 ff" if
                                 case["design"].startswith("paper") else None))
     with open(os.path.join(out, "labels", cid + ".json"), "w") as fh:
