@@ -189,8 +189,8 @@ FORMS = {
     "sens_sqrt": ("sensor_nonlinearity", [], lambda ts, s: _pieces(
         post=[P.SqrtSensor(28.0 / max(s, 1e-3))], params=dict(s_mm=28.0 / max(s, 1e-3)))),
     "asym_chargelag": ("asymmetric_dynamics", [], lambda ts, s: _pieces(
-        pre=[P.AsymChargeLag(ts, 0.002, 0.002 + 0.028 * s)],
-        params=dict(tau_up_s=0.002, tau_dn_s=0.002 + 0.028 * s))),
+        pre=[P.AsymChargeLag(ts, 0.002 * s, 0.030 * s)],
+        params=dict(tau_up_s=0.002 * s, tau_dn_s=0.030 * s))),
     "asym_relax": ("asymmetric_dynamics", [], lambda ts, s: _pieces(
         post=[P.AsymRelax(ts, 0.045 * s)], params=dict(tau_s=0.045 * s))),
     "asym_slew": ("asymmetric_dynamics", [], lambda ts, s: _pieces(

@@ -187,3 +187,12 @@ def test_scorer_matching():
     assert e["max_db"] < 1e-9 and e["max_deg"] < 1e-9
     assert score.offset_verdict({"offset_dependence": {"p_value": 0.01}})[0] is True
     assert score.offset_verdict({"x": {"offset_dependence": "independent (p = 0.4)"}})[0] is False
+
+
+def test_scorer_flag_and_shrink():
+    """Flag heuristic finds a 'did not generalise' list; shrink = 1 - aug/nom."""
+    v = {"effects": [], "heldout": {"nrmse_nominal": 0.2, "nrmse_augmented": 0.05},
+         "did_not_generalise": [{"name": "hysteresis"}]}
+    assert score.flagged(v) == "/did_not_generalise"
+    assert abs(score.shrink(v)[0] - 0.75) < 1e-12
+    assert score.flagged({"effects": [], "did_not_generalise": []}) is None
