@@ -251,6 +251,18 @@ def summarise(results, labels):
                        g0_db=None if not x["err"] else round(x["err"]["g0_db"], 3),
                        offset_rejected=x["offset_rejected"], offset_p=x["offset_p"])
                   for x in idr])
+    fams = {}
+    for x in idr:
+        k = next((p for p in ("paper", "lin", "log", "ms", "prbs", "rlev", "steps", "cl", "mix")
+                  if x["design"].startswith(p)), x["design"])
+        d = fams.setdefault(k, dict(n=0, passed=0, worst_db=0.0, worst_deg=0.0, rates=[]))
+        d["n"] += 1
+        d["passed"] += int(x["pass"])
+        d["rates"].append(x["fs"])
+        e = x["err"] or dict(max_db=float("inf"), max_deg=float("inf"))
+        d["worst_db"] = max(d["worst_db"], e["max_db"])
+        d["worst_deg"] = max(d["worst_deg"], e["max_deg"])
+    S["identify"]["per_design"] = fams
     tested = [x for x in idr if x["offset_rejected"] is not None]
     S["offset_test"] = dict(reported=len(tested), rejected=sum(x["offset_rejected"] for x in tested),
                             false_rejection=(sum(x["offset_rejected"] for x in tested) / len(tested)
@@ -338,6 +350,9 @@ def report(S):
                  f"{str(c['max_db']):>7s} {str(c['max_deg']):>7s} {str(c['g0_db']):>7s} "
                  f"{'-' if c['offset_rejected'] is None else ('REJECT' if c['offset_rejected'] else 'ok')}"
                  f"{'' if c['offset_p'] is None else ' p=%.3g' % c['offset_p']}")
+    for k, d in sorted(i.get("per_design", {}).items()):
+        L.append(f"  design {k:14s} {d['passed']}/{d['n']} pass, worst {d['worst_db']:.2f} dB "
+                 f"{d['worst_deg']:.1f} deg, rates {sorted(set(d['rates']))}")
     o = S["offset_test"]
     L.append(f"OFFSET TEST: false rejections {o['rejected']}/{o['reported']} ({pct(o['false_rejection'])}),"
              f" key {o['key']}")
