@@ -89,7 +89,7 @@ def test_realtime_worker_reports_every_tick_of_one_loop():
 
 
 def test_only_rejects_unknown_figures(tmp_path):
-    args = argparse.Namespace(quick=True, json=str(tmp_path / "b.json"), only="11", cache=str(tmp_path))
+    args = argparse.Namespace(quick=True, json=str(tmp_path / "b.json"), only="12", cache=str(tmp_path))
     with pytest.raises(bench.BadInputError, match="--only"):
         bench.run(args)
 

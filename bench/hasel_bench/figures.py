@@ -60,6 +60,8 @@ Figures (each measured against its baseline in the same run where one exists):
 10. The same on a second verification corpus (``bench/verify2``, session 9: another author
    with its own simulator and effect forms, 103 cases; about 50 min with 2 jobs on 2 cores;
    ``--quick`` scores three of its cases).
+11. The same on a third verification corpus (``bench/verify3``, session 10: a third author,
+   88 cases, 21 effect forms; ``--quick`` scores three of its cases).
 
 Executors, and why:
 
@@ -112,7 +114,8 @@ __all__ = ["add_arguments", "run", "Row", "format_table", "FIGURES"]
 FIGURES = {1: "graph in simulated time", 2: "offline core loop", 3: "real time 200 Hz",
            4: "scale", 5: "identification and recording", 6: "diagnosis blind check",
            7: "200 Hz under load", 8: "loader fuzzing", 9: "verification corpus (untuned)",
-           10: "second verification corpus (untuned, another author)"}
+           10: "second verification corpus (untuned, another author)",
+           11: "third verification corpus (untuned, a third author)"}
 
 
 @dataclass
@@ -597,6 +600,58 @@ def _fig10(b: _Bench) -> None:
               len(i["dependence_false_rejections"]) <= 0.05 * i["dependence_tested"])
 
 
+def _fig11(b: _Bench) -> None:
+    """Identification and diagnosis on the third verification corpus (``bench/verify3``, session 10:
+    a third author, its own simulator and 21 effect forms, seed 3), on which no threshold was tuned;
+    scored black-box by its own scorer. ``--quick`` scores its own three-case subset."""
+    here = Path(__file__).resolve().parents[1] / "verify3"
+    if not (here / "score.py").is_file():
+        raise FileNotFoundError(f"the third verification corpus's scripts are not at {here}")
+    hasel = Path(sys.executable).with_name("hasel")
+    with tempfile.TemporaryDirectory(prefix="hasel-verify3-") as tmp:
+        b.say("11: generating the third verification corpus (about 3 min, 130 MB)")
+        subprocess.run([sys.executable, str(here / "gen.py"), "--out", tmp, "--seed", "3"], check=True,
+                       stdout=subprocess.DEVNULL)
+        b.say(f"11: scoring it black-box (2 jobs{', a 3-case subset' if b.quick else ''})")
+        out = Path(tmp, "score.json")
+        p = subprocess.run([sys.executable, str(here / "score.py"), "--corpus", tmp, "--hasel", str(hasel),
+                            "--jobs", "2", "--json", str(out), "--work", str(Path(tmp, "runs")),
+                            *(["--quick"] if b.quick else [])], check=True, stdout=subprocess.PIPE, text=True)
+        s = json.loads(out.read_text())["summary"]
+        b.reports.append("third verification corpus (untuned):\n" + p.stdout)
+    b.results["11_verify3"] = s
+
+    sg, ef, nf, sh = s["singles"], s["effect_free"], s["near_floor"], s["shrink"]
+    if sg["n"]:
+        b.row("11 verify3: single effects top-1", _frac(sg["top1"], sg["n"]), "-", None, ">= 95 %",
+              sg["top1"] >= 0.95 * sg["n"])
+    for cat in ("pairs", "triples"):
+        c = s[cat]
+        if c["n"]:
+            ok = None if c["recall"] is None or c["precision"] is None else c["recall"] >= 0.85 and c["precision"] >= 0.90
+            b.row(f"11 verify3: {cat} recall / precision", f"{_f2(c['recall'])} / {_f2(c['precision'])}", "-", None,
+                  ">= 0.85 / 0.90", ok)
+    if ef["n"]:
+        b.row("11 verify3: effect-free logs with no effect named", _frac(ef["clean"], ef["n"]), "-", None, ">= 95 %",
+              ef["clean"] >= 0.95 * ef["n"])
+    if nf["n"]:
+        b.row("11 verify3: near-floor false attributions", _frac(nf["false_attribution"], nf["n"]), "-", None, "0",
+              nf["false_attribution"] == 0)
+    if sh["n"]:
+        b.row("11 verify3: held-out shrink median / worst; worse, unflagged",
+              f"{_f2(sh['median'])} / {_f2(sh['worst'])}; {len(sh['worse_unflagged'])}", "-", None, ">= 0.80; 0",
+              sh["median"] >= 0.80 and not sh["worse_unflagged"])
+    i, ot = s["identify"], s["offset_test"]
+    if i["n"]:
+        b.row("11 verify3: identify exit 0 and within 1 dB / 5 deg (0.1-15 Hz)", _frac(i["passed"], i["n"]), "-",
+              None, "all", i["passed"] == i["n"])
+    if ot["reported"]:
+        b.row("11 verify3: offset test false rejections", _frac(ot["rejected"], ot["reported"]), "-", None,
+              "<= 5 %", ot["rejected"] <= 0.05 * ot["reported"])
+    b.row("11 verify3: seconds per case, median / max",
+          f"{s['seconds']['median']:.1f} / {s['seconds']['max']:.1f}", "-", None, "-", None)
+
+
 def _frac(a: int, n: int) -> str:
     """``a/n`` as counted, "-" when there is nothing to count."""
     return f"{a}/{n}" if n else "-"
@@ -655,7 +710,8 @@ def _fig8(b: _Bench) -> None:
 
 
 _RUNNERS: dict[int, Callable[[_Bench], None]] = {1: _fig1, 2: _fig2, 3: _fig3, 4: _fig4, 5: _fig5, 6: _fig6,
-                                                  7: _fig7, 8: _fig8, 9: _fig9, 10: _fig10}
+                                                  7: _fig7, 8: _fig8, 9: _fig9, 10: _fig10,
+                                                  11: _fig11}
 
 
 def _parse_only(text: str) -> list[int]:
