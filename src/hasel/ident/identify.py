@@ -694,7 +694,8 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     estimate is not at its bound (95 % of ``max_shift``).
 
     Returns the kept fit and, when the data did not decide (neither criterion better
-    nor worse, the estimate inside its bound: a tie), the fit not kept with its offset
+    nor worse, or one better and the other worse; the estimate inside its bound: a tie),
+    the fit not kept with its offset
     (else None): check 9 of :mod:`hasel.ident.checks` judges whether the two ``G``
     differ by more than the tolerance.
     """
@@ -729,7 +730,12 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
                  f"{', at its bound' if at_bound else ''}) changes the held-out "
                  f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
                  f"to {c_free:.3g}; the zero-order-hold convention is kept")
-    return oe0, (oe if not better and not worse and not at_bound else None)
+    # the two criteria disagreeing (one says better, the other worse) is no decision either: a tie, judged by check 9
+    # (a non-periodic input's Welch estimate, the in-band criterion's reference, carries a leakage and transient
+    # bias near the band's top that its error bars do not hold; against the held-out error it may be wrong either
+    # way: on the tuning logs it refused offsets that were right and supported ones that were right)
+    tie = (not better and not worse) or (better and worse)
+    return oe0, (oe if tie and not at_bound else None)
 
 
 #: Held-out NRMSE share by which a higher order, given the lower order's timing offset too, must beat the lower
