@@ -95,7 +95,7 @@ COMMANDS: list[Command] = [
             _env_args, "hasel.cli:run_env", True),
     Command("tune", "design the dual-mode gains C+ and C- on a plant model (offline loop); writes a parameter file",
             "hasel.tune:add_arguments", "hasel.tune:run", False, (Output("out"), Output("json")), ("start",)),
-    Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP or CSV)",
+    Command("identify", "frequency response, static map and transfer-function fit of a log (MCAP, CSV or MAT)",
             "hasel.ident.cli:add_arguments", "hasel.ident.cli:run", False,
             (Output("json"), Output("plot"), Output("report", "report.md"))),
     Command("diagnose", "sim-to-real gap diagnosis: where, which unmodelled effect, how far it shrinks",

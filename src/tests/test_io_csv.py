@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import csv
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 from realdata import datasets_dir
@@ -151,3 +154,23 @@ def test_binary_garbage_is_a_data_file_error(tmp_path):
     p.write_bytes(b"t_s,voltage_kv,stroke_mm\n0,1,2\n\xff\xfe\x00\x81,2,3\n")
     with pytest.raises(DataFileError, match="UTF-8"):
         load_io(p)
+
+
+def test_identify_reads_a_mat_log_as_it_reads_csv(tmp_path):
+    """``hasel identify`` takes a MATLAB log (its help says so): random levels through P(s), 200 Hz."""
+    from hasel import paper
+    from hasel.diagnose.prep import LinearSim
+
+    num, den = paper.plant_tf()
+    fs = 200.0
+    t = np.arange(6000) / fs
+    u = np.repeat(np.random.default_rng(0).uniform(1.0, 6.0, 200), 30)
+    y = LinearSim(num, den, fs).run(u) + 0.005 * np.random.default_rng(1).standard_normal(t.size)
+    scipy.io.savemat(tmp_path / "log.mat", {"t_s": t, "voltage_kv": u, "stroke_mm": y})
+    out = tmp_path / "model.json"
+    p = subprocess.run([sys.executable, "-m", "hasel.cli", "identify", str(tmp_path / "log.mat"), "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    m = json.loads(out.read_text())
+    g0 = np.polyval(m["num"], 0.0) / np.polyval(m["den"], 0.0)
+    assert m["usable"] is True and g0 == pytest.approx(float(np.polyval(num, 0.0) / np.polyval(den, 0.0)), rel=0.03)

@@ -32,12 +32,12 @@ def _pair(kind: type, name: str):
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``hasel identify``."""
-    p.add_argument("data", metavar="DATA", help="the log: .mcap (ROS 2) or .csv (header row)")
+    p.add_argument("data", metavar="DATA", help="the log: .mcap (ROS 2), .csv (header row) or .mat")
     p.add_argument("--json", metavar="MODEL.json", help="write the model: {\"num\", \"den\"} (descending powers "
                    "of s) plus static map, zeros/poles/gain, fit quality, band, dependence verdict")
     p.add_argument("--plot", metavar="FILE.png", help="write a Bode plot of data and fit")
     p.add_argument("--report", metavar="DIR", help="write report.md and figures into DIR")
-    p.add_argument("--time", metavar="COL", default=None, help="CSV time column, s (default t_s)")
+    p.add_argument("--time", metavar="COL", default=None, help="CSV/MAT time column, s (default t_s)")
     p.add_argument("--input", metavar="COL|/topic.field", default=None,
                    help="input signal: CSV column (default voltage_kv) or MCAP /topic.field "
                    "(default /plant/batch.voltage_kv)")
