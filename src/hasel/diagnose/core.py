@@ -244,6 +244,13 @@ class DiagnoseOptions:
         :func:`hasel.effects.evidence.load_or_delay`'s and the backward check's own; checked on
         ``bench/tune_diag/loads.py``, where a delay fitted first left the load beside it raising the
         resonance and the load was taken out].
+    map_side_check : bool
+        After the joint refinement, a static map (``static_nonlinearity``) or a sensor curve beside other
+        effects is replaced by the other side's map (refitted given the others, all refined jointly) and
+        the side with the lower validation error is kept; both are listed as ambiguous when the held-out
+        block test prefers neither by ``t_min`` (:func:`_map_side_stage`) [design: no new threshold;
+        checked on ``bench/tune_diag/maps.py`` seed 41, input maps beside delays, drifts, loads,
+        hystereses and saturations, and sensor curves beside them as controls].
     identify : {"auto", "internal", "ident"}
         Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
         else the internal output-error fit [design: "auto" keeps the one whose simulation
@@ -300,6 +307,7 @@ class DiagnoseOptions:
     backward_check: bool = True
     load_adds_mass: bool = True
     load_magnitude_evidence: bool = True
+    map_side_check: bool = True
     joint_refine_nfev: int = 12
     identify: str = "auto"
     target_rate_hz: float | None = None
@@ -1612,6 +1620,64 @@ def _joint_refine_stage(ctx: _Context, st: _State) -> None:
             st.adopt(refined, m_tr, m_ho, e_new)
 
 
+#: The two sides a static map can sit on: before the dynamics (``static_nonlinearity``) or on the measured
+#: stroke (``sensor_nonlinearity``); see :func:`_map_side_stage`.
+_MAP_SIDES = {"static_nonlinearity": "sensor_nonlinearity", "sensor_nonlinearity": "static_nonlinearity"}
+
+
+def _map_side_stage(ctx: _Context, st: _State) -> None:
+    """Stage: a map beside other effects is put on the side of the dynamics the final set favours.
+
+    An input-side map distorts the voltage before the dynamics (its harmonics are filtered by the
+    model, and its effect follows the input's level); a sensor curve bends the measured output (its
+    effect follows the stroke's level at any frequency). Beside an effect not yet in place (a delay, a
+    drift, a hysteresis) the first rounds compare the two against a residual that other effect
+    still dominates, and the curve that soaks up more of *that* wins. Here, once the set is complete,
+    the map is replaced by the other side's (fitted given the others, then every effect refined jointly,
+    as the set itself was), and the two complete sets are compared on validation: the lower error
+    decides. When the held-out block test prefers neither by ``t_min``, the verdict lists both as
+    ambiguous with their numbers and the experiment that separates them. Only for sets of two or more
+    searched effects (alone, the first round already compared the two sides on equal terms)."""
+    names_ = [k for k, v in st.current.items() if k != LINEAR and not _fixed(k, v)]
+    have = [n for n in _MAP_SIDES if n in st.current]
+    if len(have) != 1 or len(names_) < 2 or _fixed(have[0], st.current[have[0]]):
+        return
+    name = have[0]
+    other = _MAP_SIDES[name]
+    rest = _without(st.current, name)
+    fit = fit_family(ctx.pipe, rest, other)
+    if fit is None:
+        return
+    alt = joint_refine(ctx.pipe, {**rest, other: fit}, max_nfev=ctx.opts.joint_refine_nfev)
+    if other not in alt or linear_static(ctx.pipe, alt) or _raises(ctx, alt):
+        return
+    m_tr, m_ho, e_alt = ctx.scores(alt)
+    switch = m_ho < st.mse_ho
+    e_win, e_lose = (e_alt, st.e_ho) if switch else (st.e_ho, e_alt)
+    pref = block_test(e_lose, e_win, ctx.labels_va, ctx.slow_n)
+    m_win, m_lose = (m_ho, st.mse_ho) if switch else (st.mse_ho, m_ho)
+    win, lose = (other, name) if switch else (name, other)
+    ctx.say(f"map side with the others in place: {name} validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f}, {other} "
+            f"{ctx.to_nrmse(m_ho):.4f} (block preference {pref:.1f}) -> {win}")
+    st.rounds.append({"round": len(st.rounds) + 1, "map_side_check": True, "best": win, "accepted": bool(switch),
+                      "preference": pref, "candidates": [
+                          {"name": " + ".join(k for k in st.current if k != LINEAR),
+                           "nrmse_validation": ctx.to_nrmse(st.mse_ho)},
+                          {"name": " + ".join(k for k in alt if k != LINEAR), "nrmse_validation": ctx.to_nrmse(m_ho)}]})
+    st.ambiguous = [a for a in st.ambiguous if {a["chosen"], a["alternative"]} != {name, other}]
+    if pref < ctx.opts.t_min:
+        norm = max(st.mse_nom, 1e-300)
+        st.ambiguous.append({"chosen": win, "alternative": lose,
+                             "validation_nrmse": {"chosen": ctx.to_nrmse(m_win), "alternative": ctx.to_nrmse(m_lose)},
+                             "gap_removed": {"chosen": 1.0 - m_win / norm, "alternative": 1.0 - m_lose / norm},
+                             "preference": pref, "with_others": [k for k in rest if k != LINEAR],
+                             "experiment": _SEPARATING[frozenset((name, other))]})
+    if switch:
+        if name in st.evidence_of:
+            st.evidence_of[other] = st.evidence_of.pop(name)
+        st.adopt(dict(alt), m_tr, m_ho, e_alt)
+
+
 def _refit_rest(ctx: _Context, rest: dict[str, EffectFit]) -> tuple[dict[str, EffectFit], float, float, np.ndarray]:
     """``rest`` (the set without the effect under test) as it is or refined jointly from its values,
     whichever has the lower training error (validation decides nothing here); a refinement into a
@@ -1910,6 +1976,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     _repeat_check(ctx, st, where)
     _clip_check(ctx, st)
     _joint_refine_stage(ctx, st)
+    if opts.map_side_check:
+        _map_side_stage(ctx, st)
     _backward_check(ctx, st)
     # generalisation: on the final samples, which no choice above saw, every named effect must lower
     # the error of the set it is part of; one that does not is dropped and listed with its numbers
