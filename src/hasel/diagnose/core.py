@@ -244,6 +244,10 @@ class DiagnoseOptions:
         :func:`hasel.effects.evidence.load_or_delay`'s and the backward check's own; checked on
         ``bench/tune_diag/loads.py``, where a delay fitted first left the load beside it raising the
         resonance and the load was taken out].
+    later_joint : int
+        In the third and later rounds, this many of the best candidates are refined jointly with the
+        effects before them (``pair_joint_nfev`` iterations) before the choice (:func:`_later_refined`;
+        0: as before) [design, as the second round's pairs; checked on ``bench/tune_diag/maps.py`` seed 41].
     map_side_check : bool
         After the joint refinement, a static map (``static_nonlinearity``) or a sensor curve beside other
         effects is replaced by the other side's map (refitted given the others, all refined jointly) and
@@ -308,6 +312,7 @@ class DiagnoseOptions:
     load_adds_mass: bool = True
     load_magnitude_evidence: bool = True
     map_side_check: bool = True
+    later_joint: int = 2
     joint_refine_nfev: int = 12
     identify: str = "auto"
     target_rate_hz: float | None = None
@@ -1339,6 +1344,38 @@ def _pair_candidates(ctx: _Context, st: _State, singles: list[Candidate], result
     return results
 
 
+def _later_refined(ctx: _Context, st: _State, results: list[Candidate]) -> list[Candidate]:
+    """Stage of the third and later rounds: the best candidates refined jointly with the effects before them.
+
+    A candidate of a later round is fitted on top of the earlier effects as they were fitted without
+    it, and those have soaked up part of its signature (a map fitted first bends to take a small
+    hysteresis's loop, a delay stretches to take a load's phase): the newcomer is then credited only
+    with what is left, and a true third member fails the held-out test or the share of what is left
+    (``bench/tune_diag/maps.py`` seed 41: a hysteresis beside an input map and a load removed 46 % with a
+    block score of 2.5; a knee beside a delay and a soft stroke limit removed 40 %). The second round
+    already alternates and refines its best pairs (:func:`_pair_candidates`); here the best
+    ``opts.later_joint`` candidates get the same joint refinement (``opts.pair_joint_nfev``
+    iterations, all parameters of the set together) and are added as candidates when that lowers
+    their validation error. The acceptance test is unchanged: the backward check later refits the rest
+    the same way when it judges each member. Returns ``results`` with the refined sets, sorted."""
+    opts, pipe = ctx.opts, ctx.pipe
+    top = [r for r in results if not _raises(ctx, r[6])][:opts.later_joint]
+
+    def refine(r: Candidate) -> dict[str, EffectFit]:
+        return joint_refine(pipe, dict(r[6]), max_nfev=opts.pair_joint_nfev)
+
+    for r, eff in zip(top, pmap(refine, top)):
+        if _raises(ctx, eff):
+            continue
+        m_tr2, m_ho2, e2 = ctx.scores(eff)
+        if m_ho2 < r[0]:
+            ctx.say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {ctx.to_nrmse(m_ho2):.4f} "
+                    f"(joint fit)")
+            results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+    results.sort(key=lambda r: (r[0], r[1]))
+    return results
+
+
 #: Linear changes told apart by where they move the frequency response (:func:`load_or_delay`).
 _LINEAR_RIVALS = {"time_delay": "load_mass", "load_mass": "time_delay"}
 
@@ -1493,6 +1530,8 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
             singles = results
         elif rnd == 1 and opts.pair_pool > 1:
             results = _pair_candidates(ctx, st, singles, results)
+        elif rnd > 1 and opts.later_joint > 0:
+            results = _later_refined(ctx, st, results)
         # a static map that is nearly a line (e.g. after a joint refinement) is a linear correction
         # of the model, not a static nonlinearity: such a set is not a candidate
         results = [r for r in results if not linear_static(ctx.pipe, r[6])]
