@@ -1359,7 +1359,11 @@ def _later_refined(ctx: _Context, st: _State, results: list[Candidate]) -> list[
     their validation error. The acceptance test is unchanged: the backward check later refits the rest
     the same way when it judges each member. Returns ``results`` with the refined sets, sorted."""
     opts, pipe = ctx.opts, ctx.pipe
-    top = [r for r in results if not _raises(ctx, r[6])][:opts.later_joint]
+    # not a map on the other side of one already named: at low frequencies an input map and a sensor curve
+    # are one curve, and refined jointly they share it out (combos.py seed 21, combo_00 and combo_04: a
+    # second map credited with the first one's reshaping, block score 2.9)
+    top = [r for r in [r for r in results if not _raises(ctx, r[6])][:opts.later_joint]
+           if not any(_MAP_SIDES.get(r[2]) == k for k in st.current)]
 
     def refine(r: Candidate) -> dict[str, EffectFit]:
         return joint_refine(pipe, dict(r[6]), max_nfev=opts.pair_joint_nfev)
