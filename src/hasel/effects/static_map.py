@@ -12,8 +12,8 @@ Forms
   through the dynamics: it needs the linear model, ``scales.num``/``scales.den``).
 
 A map that is nearly a line (its curvature removes less than :data:`NEAR_LINEAR_SHARE`
-of what it removes beyond its offset) is a linear correction, not a nonlinearity
-(:func:`linear_static`).
+of what it removes beyond its offset, and less than :data:`CURVE_LEFT_SHARE` of what its best line leaves)
+is a linear correction, not a nonlinearity (:func:`linear_static`).
 """
 from __future__ import annotations
 
@@ -28,13 +28,21 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "map_sides", "InternalMapStage", "max_degree", "linear_static", "NEAR_LINEAR_SHARE",
+__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "map_sides", "InternalMapStage", "max_degree", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
            "StaticMapFamily", "FAMILY"]
 
 #: A static map whose curvature (its deviation from its best line) removes less than this share
 #: of what the map removes beyond its offset is a linear correction (a gain, a changed dynamic):
 #: only its offset is kept.
 NEAR_LINEAR_SHARE = 0.1
+#: ... unless the curvature removes at least this share of what the best line leaves (the map is then a
+#: nonlinearity whatever the size of its slope). Without it an input map with a large gain change (a power
+#: law, ``bench/tune_diag/maps.py`` seed 41) kept only its offset while a sensor curve, which keeps its
+#: slope, took its place: a line cannot be placed on either side of the dynamics, only the curvature can.
+#: On linear changes (the loads and delays of ``loads.py`` seed 3 and ``cases.py`` seed 7, fitted alone) the
+#: curvature removed at most 0.092 of what the line left; on the input maps beside a drift or a load whose
+#: map had been cut to its offset, 0.17-0.99.
+CURVE_LEFT_SHARE = 0.25
 #: A side of the dynamics is told apart when the runner-up side leaves this many times the best's
 #: remaining error: set on the tuning corpus (``python -m hasel_bench.othersim``, seed 0), where the four
 #: single-map cases (knee and power input maps, exponential and quadratic sensor curves) gave
@@ -212,7 +220,8 @@ def linear_static(pipe: FitContext, effects: dict[str, EffectFit]) -> bool:
 def _nearly_linear(pipe: FitContext, base: dict[str, EffectFit], variant: str, basis, th: np.ndarray) -> bool:
     """Whether the map ``th`` is nearly a line: beyond its offset (the best constant map), its
     curvature (the part beyond the best line) removes less than :data:`NEAR_LINEAR_SHARE` of what
-    the whole map removes; the rest is a slope, a linear correction."""
+    the whole map removes, and less than :data:`CURVE_LEFT_SHARE` of what the best line leaves (sums of
+    squares of the training residual); the rest is a slope, a linear correction."""
     def sse(t: np.ndarray) -> float:
         return _sse(pipe, _with(base, EffectFit("static_nonlinearity", variant, tuple(map(float, t)))))
 
@@ -221,7 +230,10 @@ def _nearly_linear(pipe: FitContext, base: dict[str, EffectFit], variant: str, b
     if beyond_offset <= 0:
         return False
     s_line = s_full if th.size <= 2 else sse(_poly_ls(pipe, base, basis, degrees=(1,)))
-    return s_line - s_full < NEAR_LINEAR_SHARE * beyond_offset
+    curvature = s_line - s_full
+    # a large gain change (a power law far from its reference voltage) makes any curvature a small share of
+    # what the map removes, yet the curvature may remove most of what the line leaves: a nonlinearity
+    return curvature < NEAR_LINEAR_SHARE * beyond_offset and curvature < CURVE_LEFT_SHARE * max(s_line, 0.0)
 
 
 
