@@ -1363,13 +1363,20 @@ def _pair_candidates(ctx: _Context, st: _State, singles: list[Candidate], result
     for i, (_, r, eff) in enumerate(improved):
         if i < opts.pair_joint:
             eff = joint_refine(pipe, eff, max_nfev=opts.pair_joint_nfev)
-        m_tr2, m_ho2, e2 = ctx.scores(eff)
-        if m_ho2 < r[0]:
-            ctx.say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {ctx.to_nrmse(m_ho2):.4f} "
-                    f"(alternating{' and joint' if i < opts.pair_joint else ''} fits)")
-            results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+        _add_if_better(ctx, results, r, eff, f"alternating{' and joint' if i < opts.pair_joint else ''} fits")
     results.sort(key=lambda r: (r[0], r[1]))
     return results
+
+
+def _add_if_better(ctx: _Context, results: list[Candidate], r: Candidate, eff: dict[str, EffectFit], how: str
+                   ) -> None:
+    """Append the refitted set ``eff`` of candidate ``r`` to ``results`` when its validation error is lower
+    than ``r``'s (``how``: the refit, for the progress line)."""
+    m_tr2, m_ho2, e2 = ctx.scores(eff)
+    if m_ho2 < r[0]:
+        ctx.say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {ctx.to_nrmse(m_ho2):.4f} "
+                f"({how})")
+        results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
 
 
 def _later_refined(ctx: _Context, st: _State, results: list[Candidate]) -> list[Candidate]:
@@ -1399,11 +1406,7 @@ def _later_refined(ctx: _Context, st: _State, results: list[Candidate]) -> list[
     for r, eff in zip(top, pmap(refine, top)):
         if _raises(ctx, eff):
             continue
-        m_tr2, m_ho2, e2 = ctx.scores(eff)
-        if m_ho2 < r[0]:
-            ctx.say(f"  {' + '.join(k for k in eff if k != LINEAR):40s} validation NRMSE {ctx.to_nrmse(m_ho2):.4f} "
-                    f"(joint fit)")
-            results.append((m_ho2, r[1], r[2], eff[r[2]], m_tr2, e2, eff))
+        _add_if_better(ctx, results, r, eff, "joint fit")
     results.sort(key=lambda r: (r[0], r[1]))
     return results
 
