@@ -29,7 +29,8 @@ for k in range(n):
     u = float(ud[ud > 0][-1]) if np.any(ud > 0) else float("nan")  # the last judged point (|G| >= 0.1 G(0))
     rows.append((e[0], e[1], u))
     print(f"draw {k} order {r.fit.nz}/{r.fit.np} usable={r.usable} max_deg={r.paper_comparison()['max_deg']:.2f} "
-          f"err@{f_top:.3g}Hz={e[0]:+.2f} err@15={e[1]:+.2f} u95@top={u:.2f}", flush=True)
+          f"err@{f_top:.3g}Hz={e[0]:+.2f} err@15={e[1]:+.2f} u95@top={u:.2f} offset={1e3 * r.timing_offset_s:+.2f} ms "
+          f"heldout={[round(o.heldout_cost, 5) for o in r.fit.scores]}", flush=True)
 a = np.array(rows)
 print(f"{spec} {label}: err@top mean {a[:, 0].mean():+.2f} sd {a[:, 0].std(ddof=1):.2f}; err@15 mean {a[:, 1].mean():+.2f} "
       f"sd {a[:, 1].std(ddof=1):.2f}; u95@top median {np.median(a[:, 2]):.2f} (sd implied {np.median(a[:, 2]) / 2:.2f})")
