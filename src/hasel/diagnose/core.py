@@ -420,16 +420,21 @@ def _as_model(model) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
-def _train_fit(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float = 0.0) -> float:
-    """Training NRMSE of a linear model's simulation, with its best output offset."""
+def _linear_outputs(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float = 0.0) -> list[np.ndarray]:
+    """A linear model's simulated output of every record (output units), its input delayed ``delay_s`` s."""
     from hasel.diagnose.prep import LinearSim
 
     sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset)
+    return [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
+            for r in prep.records]
+
+
+def _train_fit(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float = 0.0) -> float:
+    """Training NRMSE of a linear model's simulation, with its best output offset."""
     es, ys = [], []
-    for r in prep.records:
+    for r, yh in zip(prep.records, _linear_outputs(prep, num, den, delay_s)):
         if r.train.any():
-            u = np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u
-            es.append((r.y - sim.run(u))[r.train])
+            es.append((r.y - yh)[r.train])
             ys.append(r.y[r.train])
     e, y = np.concatenate(es), np.concatenate(ys)
     e = e - e.mean()
@@ -997,12 +1002,8 @@ def _gain_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float
 
     Raises :class:`DiagnosisFailed` (exit 1, ``usable: false``) before any effect is fitted: a
     units or sign error would otherwise be "explained" by a map or a sensor curve."""
-    from hasel.diagnose.prep import LinearSim
-
-    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset)
-    hs = [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
-          for r in prep.records]
-    g = scale_check([r.y for r in prep.records], hs, [r.train for r in prep.records], den, prep.rate_hz)
+    g = scale_check([r.y for r in prep.records], _linear_outputs(prep, num, den, delay_s),
+                    [r.train for r in prep.records], den, prep.rate_hz)
     band = f"{g['cutoff_hz'] / BAND_RATIO:.3g}-{g['cutoff_hz']:.3g} Hz"
     if g["checked"]:
         say(f"nominal scale in {band} on the training samples: {g['scale']:.4g} (1 = the model's gain)")
