@@ -54,7 +54,7 @@ from scipy import optimize
 
 from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, describe_params, fit_drift_on_repeats,
                                     fit_family, joint_refine, linear_static, make_linear, measured_clip, split_linear)
-from hasel.diagnose.nominal import BAND_RATIO, scale_check
+from hasel.diagnose.nominal import scale_check
 from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
@@ -991,7 +991,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
         num, den, source = _identify(prep_id, opts, say)
     else:
         g = _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
-        source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "cutoff_hz", "band_share")}}
+        source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "band_hz", "band_share")}}
     clipped = np.logical_or.reduce([m for _, m in clips.values()]) if clips else None
     timing = timing_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say, clipped, nuisance_load=given)
     return num, den, source, timing, clips
@@ -1004,7 +1004,7 @@ def _gain_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float
     units or sign error would otherwise be "explained" by a map or a sensor curve."""
     g = scale_check([r.y for r in prep.records], _linear_outputs(prep, num, den, delay_s),
                     [r.train for r in prep.records], den, prep.rate_hz)
-    band = f"{g['cutoff_hz'] / BAND_RATIO:.3g}-{g['cutoff_hz']:.3g} Hz"
+    band = "{:.3g}-{:.3g} Hz".format(*g["band_hz"])
     if g["checked"]:
         say(f"nominal scale in {band} on the training samples: {g['scale']:.4g} (1 = the model's gain)")
     else:
@@ -2096,8 +2096,8 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
         sc = source.get("nominal_scale") or {}
         if sc.get("checked"):
             # units and sign agree at low frequency: the gap is in the dynamics or an effect the library lacks
-            hint = (f"its gain and sign agree with the log at {sc['cutoff_hz'] / BAND_RATIO:.3g}-{sc['cutoff_hz']:.3g} "
-                    f"Hz (scale {sc['scale']:.3g}), "
+            hint = ("its gain and sign agree with the log at {:.3g}-{:.3g} Hz".format(*sc["band_hz"])
+                    + f" (scale {sc['scale']:.3g}), "
                     f"so the gap is in the band's dynamics or an effect no family here explains: identify a model "
                     f"from this rig (hasel identify) and diagnose against it, or log a sweep through the band")
         else:

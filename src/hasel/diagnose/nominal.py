@@ -119,11 +119,12 @@ def scale_check(ys: list[np.ndarray], y_hats: list[np.ndarray], masks: list[np.n
     Returns
     -------
     dict
-        :func:`gain_check`'s keys, with ``cutoff_hz`` and ``band_share`` (share of the
-        simulation's training variance in the band); ``checked`` is False (and ``ok``
-        True) when that share is below :data:`MIN_BAND_SHARE`.
+        :func:`gain_check`'s keys, with ``cutoff_hz``, ``band_hz`` (the band's edges, Hz) and
+        ``band_share`` (share of the simulation's training variance in the band); ``checked``
+        is False (and ``ok`` True) when that share is below :data:`MIN_BAND_SHARE`.
     """
     fc = cutoff_hz(den, rate_hz)
+    band = (fc / BAND_RATIO, fc)
     m = np.concatenate(masks)
     h = np.concatenate(y_hats)[m]
     yl = np.concatenate([band_pass(y, fc, rate_hz) for y in ys])
@@ -131,7 +132,6 @@ def scale_check(ys: list[np.ndarray], y_hats: list[np.ndarray], masks: list[np.n
     share = float(np.var(hl[m]) / max(np.var(h), 1e-300)) if h.size > 2 else 0.0
     if share < MIN_BAND_SHARE:
         return {"scale": float("nan"), "offset": float("nan"), "r2": float("nan"), "ok": True, "reason": "",
-                "checked": False,
-                "cutoff_hz": fc, "band_share": share}
+                "checked": False, "cutoff_hz": fc, "band_hz": band, "band_share": share}
     g = gain_check(yl, hl, m, max_factor)
-    return {**g, "checked": True, "cutoff_hz": fc, "band_share": share}
+    return {**g, "checked": True, "cutoff_hz": fc, "band_hz": band, "band_share": share}
