@@ -348,35 +348,43 @@ def _one_log(rng, design, rate, dur, conv, skew, form):
     return t, nz.record_voltage(u), y, conv, nz
 
 
+def make_one(seed: int, i: int) -> tuple[dict, dict]:
+    """Log ``i`` of seed ``seed``: (arrays for the ``.npz``, its description)."""
+    rng = np.random.default_rng([seed, 900 + i])
+    form = FORMS[i % len(FORMS)]
+    design = DESIGNS[(i * 5 + seed) % len(DESIGNS)]
+    rate = RATES[(i * 3 + seed) % len(RATES)]
+    conv = CONVS[(i + seed // 2) % len(CONVS)]
+    skew = float(rng.uniform(-0.45, 0.45))
+    # short at high rates (the diagnosis time grows with the working samples), up to 60 s at 100-200 Hz
+    dur = float(rng.uniform(30.0, 60.0)) if rate <= 200 else float(rng.uniform(15.0, 30.0)) if rate <= 1000 \
+        else float(rng.uniform(15.0, 20.0))
+    t, u, y, conv_used, nz = _one_log(rng, design, rate, dur, conv, skew, form)
+    arrays = {"t_s": t, "voltage_kv": u, "stroke_mm": y, "num": NUM, "den": DEN}
+    held = None
+    if rng.random() < 0.25:
+        held = DESIGNS[int(rng.integers(len(DESIGNS)))]
+        if held == design:
+            held = "multisine" if design != "multisine" else "steps"
+        th, uh, yh, _, _ = _one_log(rng, held, rate, float(rng.uniform(10.0, 15.0)), conv_used, skew, form)
+        arrays.update({"h_t_s": th, "h_voltage_kv": uh, "h_stroke_mm": yh})
+    desc = {"form": form, "design": design, "rate": rate,
+            "conv": conv_used + (f"{skew:+.2f}" if conv_used == "skew" else ""), "held": held,
+            "dur": round(float(t[-1] - t[0]), 1), "labels": [], "truth": "; ".join(nz.desc),
+            "white_um": round(nz.sd * 1e3, 2)}
+    return arrays, desc
+
+
 def make(directory: str, seed: int = 11, n_logs: int = N_LOGS) -> list[dict]:
     """Write ``n_logs`` effect-free logs (``.npz``: t_s, voltage_kv, stroke_mm, num, den, and optionally the
-    held-out log's h_t_s, h_voltage_kv, h_stroke_mm) to ``directory``; returns their descriptions."""
+    held-out log's h_t_s, h_voltage_kv, h_stroke_mm) to ``directory`` (:func:`make_one`); returns their
+    descriptions."""
     out = []
     for i in range(n_logs):
-        rng = np.random.default_rng([seed, 900 + i])
-        form = FORMS[i % len(FORMS)]
-        design = DESIGNS[(i * 5 + seed) % len(DESIGNS)]
-        rate = RATES[(i * 3 + seed) % len(RATES)]
-        conv = CONVS[(i + seed // 2) % len(CONVS)]
-        skew = float(rng.uniform(-0.45, 0.45))
-        # short at high rates (the diagnosis time grows with the working samples), up to 60 s at 100-200 Hz
-        dur = float(rng.uniform(30.0, 60.0)) if rate <= 200 else float(rng.uniform(15.0, 30.0)) if rate <= 1000 \
-            else float(rng.uniform(15.0, 20.0))
-        t, u, y, conv_used, nz = _one_log(rng, design, rate, dur, conv, skew, form)
-        extra = {}
-        held = None
-        if rng.random() < 0.25:
-            held = DESIGNS[int(rng.integers(len(DESIGNS)))]
-            if held == design:
-                held = "multisine" if design != "multisine" else "steps"
-            th, uh, yh, _, _ = _one_log(rng, held, rate, float(rng.uniform(10.0, 15.0)), conv_used, skew, form)
-            extra = {"h_t_s": th, "h_voltage_kv": uh, "h_stroke_mm": yh}
-        path = os.path.join(directory, f"indep_{i:02d}_{form}.npz")
-        np.savez_compressed(path, t_s=t, voltage_kv=u, stroke_mm=y, num=NUM, den=DEN, **extra)
-        out.append({"path": path, "form": form, "design": design, "rate": rate,
-                    "conv": conv_used + (f"{skew:+.2f}" if conv_used == "skew" else ""), "held": held,
-                    "dur": round(float(t[-1] - t[0]), 1), "labels": [], "truth": "; ".join(nz.desc),
-                    "white_um": round(nz.sd * 1e3, 2)})
+        arrays, desc = make_one(seed, i)
+        path = os.path.join(directory, f"indep_{i:02d}_{desc['form']}.npz")
+        np.savez_compressed(path, **arrays)
+        out.append({"path": path, **desc})
     return out
 
 
@@ -410,10 +418,10 @@ def run(cs: list[dict], say=print) -> list[dict]:
         rows.append(r)
         say(f"{r['log']:28s} {c['design']:11s} {c['rate']:6g} Hz {r['conv']:10s} held {str(c['held']):11s} "
             f"named {','.join(r['names']) or 'none':30s} {r['seconds']:.1f} s {r.get('error', '')}  [{c['truth']}]")
+        f3 = lambda v: "-" if v is None else f"{v:.3g}"  # noqa: E731
         for x in r.get("rounds", []):
-            if x.get("t_block") is not None:
-                say(f"   round best {x['best']} gain {x['gain']:.3f} t_block {x['t_block']:.2f} z_col "
-                    f"{x['z_coloured']:.2f} over_floor {x['over_floor']:.2f} accepted {x['accepted']}")
+            say(f"   round best {x['best']} gain {f3(x['gain'])} t_block {f3(x['t_block'])} z_col "
+                f"{f3(x['z_coloured'])} over_floor {f3(x['over_floor'])} accepted {x['accepted']}")
     return rows
 
 
