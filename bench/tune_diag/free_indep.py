@@ -375,12 +375,12 @@ def make_one(seed: int, i: int) -> tuple[dict, dict]:
     return arrays, desc
 
 
-def make(directory: str, seed: int = 11, n_logs: int = N_LOGS) -> list[dict]:
+def make(directory: str, seed: int = 11, n_logs: int = N_LOGS, indices: list[int] | None = None) -> list[dict]:
     """Write ``n_logs`` effect-free logs (``.npz``: t_s, voltage_kv, stroke_mm, num, den, and optionally the
     held-out log's h_t_s, h_voltage_kv, h_stroke_mm) to ``directory`` (:func:`make_one`); returns their
-    descriptions."""
+    descriptions (only logs ``indices`` when given)."""
     out = []
-    for i in range(n_logs):
+    for i in (range(n_logs) if indices is None else indices):
         arrays, desc = make_one(seed, i)
         path = os.path.join(directory, f"indep_{i:02d}_{desc['form']}.npz")
         np.savez_compressed(path, **arrays)
@@ -448,9 +448,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n", type=int, default=N_LOGS)
     p.add_argument("--only", default="", help="comma-separated substrings of log names / designs to run")
     p.add_argument("--list", action="store_true", help="write and list the logs, do not diagnose")
+    p.add_argument("--index", default="", help="comma-separated log indices to write and run (default: all)")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
-    cs = make(a.out, a.seed, a.n)
+    cs = make(a.out, a.seed, a.n, [int(x) for x in a.index.split(",")] if a.index else None)
     if a.only:
         keys = a.only.split(",")
         cs = [c for c in cs if any(k in os.path.basename(c["path"]) or k == c["design"] for k in keys)]
