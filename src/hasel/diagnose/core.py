@@ -1431,9 +1431,6 @@ def _later_refined(ctx: _Context, st: _State, results: list[Candidate]) -> list[
 
 #: Linear changes told apart by where they move the frequency response (:func:`load_or_delay`).
 _LINEAR_RIVALS = {"time_delay": "load_mass", "load_mass": "time_delay"}
-#: The families whose fit is a function of the level (input or output): a slow wander that co-varies with the
-#: level over time can pass for them (:attr:`DiagnoseOptions.map_fast_t_min`).
-_LEVEL_MAPS = ("static_nonlinearity", "sensor_nonlinearity")
 
 
 def _frequency_evidence(ctx: _Context, st: _State, results: list[Candidate], best: Candidate) -> Candidate:
@@ -1509,8 +1506,9 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # and the interleaved held-out blocks, which share the wander with their training neighbours, credit it.
     # A map must then also improve the fast part (slow part over wander_zc_s removed) on its own
     t_fast = ctx.fast_block(st.e_ho, e_new)
-    slow_only = (any(n in _LEVEL_MAPS for n in new_names) and z_col < opts.zc_min
-                 and t_fast < opts.map_fast_t_min)
+    slow_only = (opts.map_fast_t_min > 0 and any(n in ("static_nonlinearity", "sensor_nonlinearity")
+                                                  for n in new_names)
+                 and z_col < opts.zc_min and t_fast < opts.map_fast_t_min)
     held_out_ok = held_out_ok and not slow_only
     magnitude = None
     if (not big_enough and rnd > 0 and new_names == ["load_mass"] and opts.load_magnitude_evidence
