@@ -415,15 +415,69 @@ def _failed_gates(r: dict, opts) -> list[str]:
     return out
 
 
-def run(cases: list[dict], out: str, say=print) -> list[dict]:
+_ORACLE: dict = {}
+
+
+def _install_oracle() -> None:
+    """Wrap the forward selection: after it, the true families (``_ORACLE["labels"]``) are fitted in every order,
+    alternated and refined jointly, and the best set by training error is scored beside the chosen one
+    (validation NRMSE of both; per true member, the share of the others' refitted residual it removes and
+    its held-out block score / coloured z, as the backward check would judge it). Read-only: the selection
+    goes on unchanged. For the loss table only (is the true set within the families' reach?)."""
+    from itertools import permutations
+
+    from hasel.diagnose import core
+
+    orig = core._forward_selection
+
+    def wrapped(ctx, st):
+        orig(ctx, st)
+        labels = _ORACLE.get("labels") or []
+        if len(labels) < 2:
+            return
+        fixed = {k: v for k, v in st.current.items() if core._fixed(k, v)}
+        best = None
+        for order in permutations(labels):
+            e = dict(fixed)
+            for n in order:
+                f = core.fit_family(ctx.pipe, e, n)
+                if f is not None:
+                    e[n] = f
+            e = core._alternate(ctx, e, [n for n in order if n in e])
+            e = core.joint_refine(ctx.pipe, e, max_nfev=ctx.opts.joint_refine_nfev)
+            sc = ctx.scores(e)
+            if best is None or sc[0] < best[1][0]:
+                best = (e, sc)
+        e, (m_tr, m_ho, e_ho) = best
+        members = {}
+        for n in labels:
+            if n not in e:
+                members[n] = None
+                continue
+            _, _, m_r, e_r = core._refit_rest(ctx, core._without(e, n))
+            t_blk, z_col = ctx.held_out(e_r, e_ho)
+            members[n] = {"gain": round((m_r - m_ho) / m_r, 3) if m_r > 0 else 0.0, "t": round(t_blk, 1),
+                          "z": round(z_col, 1)}
+        _ORACLE["result"] = {"truth_nrmse": ctx.to_nrmse(m_ho), "chosen_nrmse": ctx.to_nrmse(st.mse_ho),
+                             "floor": ctx.floor_va, "members": members}
+
+    core._forward_selection = wrapped
+
+
+def run(cases: list[dict], out: str, say=print, oracle: bool = False) -> list[dict]:
     """Diagnose each case (nominal model P(s), one process); one row per case with where each lost member was
-    lost; the progress lines in ``out/trace_NN.txt``."""
+    lost; the progress lines in ``out/trace_NN.txt``; with ``oracle`` the true set's fit beside the chosen one
+    (:func:`_install_oracle`)."""
     from hasel.diagnose.core import DiagnoseOptions, diagnose
     from hasel.diagnose.pool import set_jobs
 
     set_jobs(1)
+    if oracle:
+        _install_oracle()
     rows = []
     for c in cases:
+        _ORACLE.clear()
+        _ORACLE["labels"] = c["labels"]
         d = np.load(c["path"])
         lines: list[str] = []
         opts = DiagnoseOptions(progress=lines.append)
@@ -444,11 +498,14 @@ def run(cases: list[dict], out: str, say=print) -> list[dict]:
         except Exception as err:  # noqa: BLE001 - a crash is a result
             r = {"names": [], "error": f"{type(err).__name__}: {err}", "lost": {n: "error" for n in c["labels"]}}
         r.update(kind=c["kind"], labels=c["labels"], small=c.get("small"), seconds=time.perf_counter() - t0)
+        if "result" in _ORACLE:
+            r["oracle"] = _ORACLE["result"]
         with open(os.path.join(out, f"trace_{os.path.basename(c['path'])[3:5]}.txt"), "w") as fh:
             fh.write("\n".join(lines) + "\n")
         rows.append(r)
         say(f"{os.path.basename(c['path']):40s} truth {','.join(c['labels']) or 'none':50s} named "
-            f"{','.join(r['names']) or 'none':50s} {r['seconds']:.1f} s lost {r['lost']} {r.get('error', '')}")
+            f"{','.join(r['names']) or 'none':50s} {r['seconds']:.1f} s lost {r['lost']} {r.get('error', '')}"
+            + (f" oracle {r['oracle']}" if "oracle" in r else ""))
     return rows
 
 
@@ -488,12 +545,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=21)
     p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
     p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
+    p.add_argument("--oracle", action="store_true", help="also fit the true families (slower; the loss table)")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
     if not cases:
         return 0
-    rows = run(cases, a.out, lambda m: (print(m), sys.stdout.flush()))
+    rows = run(cases, a.out, lambda m: (print(m), sys.stdout.flush()), oracle=a.oracle)
     s = summary(rows)
     print(json.dumps(s, indent=1))
     with open(os.path.join(a.out, "results.json"), "w") as fh:
