@@ -123,7 +123,7 @@ class DriftStage:
 def tau_min(pipe) -> float:
     """Shortest drift time constant the diagnosis tries, s: 20 dominant time constants, 30 % of the
     log, at least 50 samples."""
-    return max(20.0 * pipe.t_dom, 0.1 * pipe.span_s, 50.0 * pipe.prep.dt_s)
+    return max(20.0 * pipe.t_dom, 0.3 * pipe.span_s, 50.0 * pipe.prep.dt_s)
 
 
 def smoothing_s(pipe) -> float:
