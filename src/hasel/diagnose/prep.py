@@ -38,11 +38,11 @@ from scipy import signal, stats
 
 from hasel.errors import BadInputError
 from hasel.ident.freqresp import excited_band
-from hasel.lti import zoh_sos
+from hasel.lti import blockmean_nodes, blockmean_sos, zoh_sos
 from hasel.metrics import nrmse
 from hasel.signals import uniform_grid
 
-__all__ = ["Record", "Prepared", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
+__all__ = ["Record", "Prepared", "BlockOffset", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
            "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
 
 
@@ -70,6 +70,26 @@ class Record:
     def __post_init__(self) -> None:
         if self.valid is None:
             self.valid = np.zeros(self.t_s.size, bool)
+
+
+class BlockOffset(float):
+    """An output sampling offset (working samples) of a log brought down by block means of ``decimation`` samples.
+
+    A plain float to every caller; :class:`LinearSim` reads ``decimation`` from it and then
+    simulates the block means themselves (:func:`hasel.lti.blockmean_sos`) instead of
+    holding each block's mean input and interpolating the output. :class:`Prepared` wraps
+    every offset set on it, so that a refined (timing) offset keeps the decimation.
+    """
+
+    decimation: int
+
+    def __new__(cls, value: float, decimation: int = 1) -> "BlockOffset":
+        obj = super().__new__(cls, value)
+        obj.decimation = int(decimation)
+        return obj
+
+    def __reduce__(self):
+        return (BlockOffset, (float(self), self.decimation))
 
 
 @dataclass
@@ -101,6 +121,12 @@ class Prepared:
     split: str
     info: dict = field(default_factory=dict)
     sample_offset: float = 0.0
+
+    def __setattr__(self, name: str, value) -> None:
+        # the sampling offset of block means carries the decimation to every LinearSim built from it
+        if name == "sample_offset" and self.__dict__.get("decimation", 1) > 1:
+            value = BlockOffset(float(value), self.__dict__["decimation"])
+        super().__setattr__(name, value)
 
     @property
     def dt_s(self) -> float:
@@ -371,6 +397,20 @@ class LinearSim:
             if not np.all(np.isfinite(self.sos)):
                 raise BadInputError("the model cannot be discretised at the working rate (non-finite result)")
         self._zi = signal.sosfilt_zi(self.sos)
+        # block means of q > 1 original samples (a BlockOffset): simulate the block means themselves
+        self.decimation = max(1, int(getattr(offset, "decimation", 1)))
+        self._block = None
+        if self.decimation > 1:
+            q = self.decimation
+            try:
+                with np.errstate(all="ignore"), warnings.catch_warnings():
+                    warnings.simplefilter("ignore", signal.BadCoefficients)
+                    sos = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
+                    zi = signal.sosfilt_zi(sos)
+                if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)):
+                    self._block = (sos, zi)
+            except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
+                self._block = None  # the hold-and-interpolate simulation below
 
     def run_start(self, u: np.ndarray) -> np.ndarray:
         """Output at the interval starts, ``n + 1`` samples (the last one after ``u[-1]``'s interval)."""
@@ -380,8 +420,23 @@ class LinearSim:
         return ys
 
     def run(self, u: np.ndarray) -> np.ndarray:
-        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before)."""
-        return at_offset(self.run_start(u), self.offset)
+        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before).
+
+        For block means (``decimation`` q > 1, see :class:`BlockOffset`): the mean of the ``q``
+        outputs in each interval, ``offset - (q - 1) / 2q`` working samples later than the
+        original samples, for the input piecewise linear with the given block means
+        (:func:`hasel.lti.blockmean_sos`). Otherwise the input is held over each interval and
+        the output read ``offset`` into it.
+        """
+        if self._block is None:
+            return at_offset(self.run_start(u), self.offset)
+        u = np.asarray(u, float)
+        if u.size < 3:
+            return at_offset(self.run_start(u), self.offset)
+        sos, zi = self._block
+        w = blockmean_nodes(u)
+        y, _ = signal.sosfilt(sos, np.concatenate([w[1:], w[-1:]]), zi=zi * w[0])
+        return y
 
 
 def at_offset(ys: np.ndarray, offset: float) -> np.ndarray:
