@@ -6,8 +6,12 @@ input is exactly the input held over that block, and input and output are
 filtered alike). A continuous model is simulated with its input held over each working
 interval (a zero-order hold, the convention of a DAC and of this project's plant) and
 its output taken where the log's output sample lies in that interval: at its start for
-an unaveraged zero-order-hold log, ``(q - 1) / 2q`` into it for block means of ``q``
-samples (:attr:`Prepared.sample_offset`). Other conventions (a first-order hold, centred
+an unaveraged zero-order-hold log. For block means of ``q > 1`` samples the simulation
+reproduces the block means themselves (:func:`hasel.lti.blockmean_sos`: the input piecewise
+linear with the given block integrals, the output the exact mean of the ``q`` samples): holding
+each block's mean input and reading the output ``(q - 1) / 2q`` into the interval
+(:attr:`Prepared.sample_offset`) would be off by a gain error of relative size about
+``(2 pi f / rate)^2 / 6``, above the floor of a quiet sensor (``RESULT-h-efree2.md``). Other conventions (a first-order hold, centred
 samples, a fractional-sample offset between the input and output clocks) shift that
 point by up to a sample; the diagnosis estimates the shift as a nuisance
 (:func:`estimate_timing`) and reports it as a timing offset, not as a delay.
@@ -365,7 +369,11 @@ class LinearSim:
     rate_hz : float
         Working rate, Hz.
     offset : float
-        Where in the interval the output is taken, in working samples (-1 to 1).
+        Where in the interval the output is taken, in working samples (-1 to 1). A
+        :class:`BlockOffset` (as :attr:`Prepared.sample_offset` of a log brought down by block
+        means of ``q > 1`` samples) makes :meth:`run` simulate the block means instead
+        (``offset - (q - 1) / 2q`` is then the shift of the ``q`` output samples); a plain
+        float, or ``q`` = 1, keeps the held-input simulation exactly.
     """
 
     def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float, offset: float = 0.0) -> None:
