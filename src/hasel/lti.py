@@ -201,27 +201,25 @@ def blockmean_sos(num: Sequence[float], den: Sequence[float], dt_s: float, q: in
     # x' = A x + B u with u = u1, u1' = u2 / T, u2' = 0: the responses to a held and to a ramp input
     M = np.zeros((n + 2, n + 2)); M[:n, :n] = A; M[:n, n:n + 1] = B; M[n, n + 1] = 1.0 / dt_s
 
-    def parts(E: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return E[:n, :n], E[:n, n] - E[:n, n + 1], E[:n, n + 1]   # Phi(t), Gamma0(t), Gamma1(t)
-
+    # only C times the augmented exponentials is needed: row vectors advanced one original sample at a time
     E_T = linalg.expm(M * dt_s)
-    Phi, G0, G1 = parts(E_T)
+    Phi, G0, G1 = E_T[:n, :n], E_T[:n, n] - E_T[:n, n + 1], E_T[:n, n + 1]
     step = linalg.expm(M * (dt_s / q))
-    E = linalg.expm(M * float(tau[0]))   # exp(M tau_j), advanced by one original sample per j
+    c_aug = np.concatenate([C[0], [0.0, 0.0]])
+    E0 = linalg.expm(M * float(tau[0]))
+    r = c_aug @ E0             # C exp(M tau_j)
+    s_ = (c_aug @ E_T) @ E0    # C exp(M (tau_j + T))
     cx = np.zeros(n); em1 = e0 = e1 = 0.0
     for t in tau:
-        if t >= 0.0:   # between nodes k and k + 1
-            P, g0, g1 = parts(E)
-            cx += (C @ P)[0]
-            e0 += float((C @ g0)[0]) + d * (1.0 - t / dt_s)
-            e1 += float((C @ g1)[0]) + d * t / dt_s
+        cx += r[:n]
+        if t >= 0.0:   # between nodes k and k + 1: Gamma0 = F0 - F1, Gamma1 = F1
+            e0 += (r[n] - r[n + 1]) + d * (1.0 - t / dt_s)
+            e1 += r[n + 1] + d * t / dt_s
         else:          # between nodes k - 1 and k, written from x_k backwards
-            Pn = E[:n, :n]
-            _, g0, g1 = parts(E_T @ E)
-            cx += (C @ Pn)[0]
-            em1 += float((C @ (g0 - Pn @ G0))[0]) + d * (-t / dt_s)
-            e0 += float((C @ (g1 - Pn @ G1))[0]) + d * (1.0 + t / dt_s)
-        E = E @ step
+            em1 += (s_[n] - s_[n + 1]) - r[:n] @ G0 + d * (-t / dt_s)
+            e0 += s_[n + 1] - r[:n] @ G1 + d * (1.0 + t / dt_s)
+        r = r @ step
+        s_ = s_ @ step
     cx, em1, e0, e1 = cx / q, em1 / q, e0 / q, e1 / q
     # x_{k+1} = Phi x_k + G0 w_k + G1 w_{k+1};  y_k = cx x_k + em1 w_{k-1} + e0 w_k + e1 w_{k+1}
     # with v_k = w_{k+1} and the state [x_k, v_{k-1}, v_{k-2}] this is causal in v
@@ -247,17 +245,20 @@ def blockmean_nodes(u: np.ndarray) -> np.ndarray:
 
     With nodes at the block centres, the mean of the linear interpolant over block ``k`` is
     ``w[k] + (w[k-1] - 2 w[k] + w[k+1]) / 8``; this solves that tridiagonal system (well
-    conditioned: its smallest gain, at the Nyquist rate, is 1/2), with the input constant
-    beyond both ends (``w[-1] = w[0]``, ``w[n] = w[n-1]``).
+    conditioned: its smallest gain, at the Nyquist rate, is 1/2) for the input constant beyond
+    both ends, by a causal and an anti-causal first-order recursion (pole ``2 sqrt 2 - 3``).
     """
     u = np.asarray(u, float)
-    n = u.size
-    if n < 3:
+    if u.size < 3:
         return u.copy()
-    ab = np.empty((3, n))
-    ab[0, :] = 0.125; ab[2, :] = 0.125; ab[1, :] = 0.75
-    ab[1, 0] = ab[1, -1] = 0.875
-    return linalg.solve_banded((1, 1), ab, u)
+    # (w[k-1] + 6 w[k] + w[k+1]) / 8 = g (1 - r z^-1)(1 - r z) w, r = 2 sqrt 2 - 3: a causal and an
+    # anti-causal first-order recursion, each started at rest with the end value
+    r = 2.0 * np.sqrt(2.0) - 3.0
+    g = -1.0 / (8.0 * r)
+    x, _ = signal.lfilter([1.0], [1.0, -r], u, zi=[r * u[0] / (1.0 - r)])
+    x = x[::-1]
+    w, _ = signal.lfilter([1.0], [1.0, -r], x, zi=[r * x[0] / (1.0 - r)])
+    return w[::-1] / g
 
 
 def critical2_analog(cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:

@@ -350,6 +350,10 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
                     sample_offset=(q - 1) / (2.0 * q))
 
 
+#: Block-mean discretisations already built (the same model, rate and offset recur across fits).
+_BLOCK_CACHE: dict = {}
+
+
 class LinearSim:
     """Simulate a continuous transfer function on working-rate samples (input held over each interval).
 
@@ -390,41 +394,64 @@ class LinearSim:
         self.num, self.den, self.offset = num, den, float(offset)
         self.dc_gain = float(np.polyval(num, 0.0) / np.polyval(den, 0.0))
         num = np.trim_zeros(num, "f") if np.any(num) else num[-1:]
+        self._model = (num, den, float(rate_hz))
+        self._sos = self._zi = None
+        # block means of q > 1 original samples (a BlockOffset): simulate the block means themselves
+        self.decimation = max(1, int(getattr(offset, "decimation", 1)))
+        self._block = None
+        if self.decimation > 1:
+            q = self.decimation
+            key = (num.tobytes(), den.tobytes(), float(rate_hz), q, self.offset)
+            self._block = _BLOCK_CACHE.get(key)
+            if self._block is None:
+                try:
+                    with np.errstate(all="ignore"), warnings.catch_warnings():
+                        warnings.simplefilter("ignore", signal.BadCoefficients)
+                        sos = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
+                        zi = signal.sosfilt_zi(sos)
+                    if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)):
+                        self._block = (sos, zi)
+                except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
+                    self._block = None  # the hold-and-interpolate simulation below
+                if self._block is not None:
+                    if len(_BLOCK_CACHE) > 256:
+                        _BLOCK_CACHE.clear()
+                    _BLOCK_CACHE[key] = self._block
+        if self._block is None:
+            self._build_zoh()   # (with block means it is built only if run_start is called)
+
+    def _build_zoh(self) -> None:
+        """The zero-order-hold discretisation (``sos``, interval-start outputs) at the working rate."""
+        num, den, rate_hz = self._model
         try:
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", signal.BadCoefficients)
-                self.sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
-            if not np.all(np.isfinite(self.sos)):
+                sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
+            if not np.all(np.isfinite(sos)):
                 raise ValueError("non-finite sections")
         except (StopIteration, ValueError, np.linalg.LinAlgError):
             # zeros at s = 0 or extreme pole spreads: plain ZOH through the polynomial form
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", signal.BadCoefficients)
                 numd, dend, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method="zoh")
-                self.sos = signal.tf2sos(np.atleast_1d(np.squeeze(numd)), dend)
-            if not np.all(np.isfinite(self.sos)):
+                sos = signal.tf2sos(np.atleast_1d(np.squeeze(numd)), dend)
+            if not np.all(np.isfinite(sos)):
                 raise BadInputError("the model cannot be discretised at the working rate (non-finite result)")
-        self._zi = signal.sosfilt_zi(self.sos)
-        # block means of q > 1 original samples (a BlockOffset): simulate the block means themselves
-        self.decimation = max(1, int(getattr(offset, "decimation", 1)))
-        self._block = None
-        if self.decimation > 1:
-            q = self.decimation
-            try:
-                with np.errstate(all="ignore"), warnings.catch_warnings():
-                    warnings.simplefilter("ignore", signal.BadCoefficients)
-                    sos = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
-                    zi = signal.sosfilt_zi(sos)
-                if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)):
-                    self._block = (sos, zi)
-            except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
-                self._block = None  # the hold-and-interpolate simulation below
+        self._sos, self._zi = sos, signal.sosfilt_zi(sos)
+
+    @property
+    def sos(self) -> np.ndarray:
+        """Second-order sections of the zero-order-hold discretisation (interval-start outputs)."""
+        if self._sos is None:
+            self._build_zoh()
+        return self._sos
 
     def run_start(self, u: np.ndarray) -> np.ndarray:
         """Output at the interval starts, ``n + 1`` samples (the last one after ``u[-1]``'s interval)."""
         u = np.asarray(u, float)
         x = np.concatenate([u, u[-1:]])
-        ys, _ = signal.sosfilt(self.sos, x, zi=self._zi * u[0])
+        sos = self.sos
+        ys, _ = signal.sosfilt(sos, x, zi=self._zi * u[0])
         return ys
 
     def run(self, u: np.ndarray) -> np.ndarray:
