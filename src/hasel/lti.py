@@ -153,7 +153,7 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
 
 
 def blockmean_sos(num: Sequence[float], den: Sequence[float], dt_s: float, q: int,
-                  shift: float = 0.0) -> np.ndarray:
+                  shift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Working-rate discretisation of ``num(s)/den(s)`` whose output is a mean of ``q`` samples.
 
     A log sampled ``q`` times faster than the working rate and brought down by block means
@@ -181,8 +181,9 @@ def blockmean_sos(num: Sequence[float], den: Sequence[float], dt_s: float, q: in
     Returns
     -------
     sos : ndarray, shape (n_sections, 6)
-        For :func:`scipy.signal.sosfilt` applied to the nodes advanced by one sample
-        (``v[k] = w[k + 1]``): its output ``k`` is the block mean ``k``.
+        A strictly proper part, for :func:`scipy.signal.sosfilt` applied to the nodes ``w``.
+    taps : ndarray, shape (3,)
+        Weights of ``w[k-1], w[k], w[k+1]`` added to its output ``k``: the sum is the block mean ``k``.
     """
     dt_s = positive("dt_s", dt_s)
     q = int(q)
@@ -221,23 +222,23 @@ def blockmean_sos(num: Sequence[float], den: Sequence[float], dt_s: float, q: in
         r = r @ step
         s_ = s_ @ step
     cx, em1, e0, e1 = cx / q, em1 / q, e0 / q, e1 / q
-    # x_{k+1} = Phi x_k + G0 w_k + G1 w_{k+1};  y_k = cx x_k + em1 w_{k-1} + e0 w_k + e1 w_{k+1}
-    # with v_k = w_{k+1} and the state [x_k, v_{k-1}, v_{k-2}] this is causal in v
-    Ad = np.zeros((n + 2, n + 2)); Ad[:n, :n] = Phi; Ad[:n, n] = G0; Ad[n + 1, n] = 1.0
-    Bd = np.zeros((n + 2, 1)); Bd[:n, 0] = G1; Bd[n, 0] = 1.0
-    Cd = np.concatenate([cx, [e0, em1]]).reshape(1, -1)
-    Dd = np.array([[e1]])
-    pd = _clean_roots(linalg.eigvals(Ad))
-    zd = _clean_roots(_ss_zeros(Ad, Bd, Cd, Dd))
+    # x_{k+1} = Phi x_k + G0 w_k + G1 w_{k+1};  y_k = cx x_k + em1 w_{k-1} + e0 w_k + e1 w_{k+1}.
+    # With z_k = x_k - G1 w_k: z_{k+1} = Phi z_k + (Phi G1 + G0) w_k (a strictly proper system of w) and
+    # y_k = cx z_k + em1 w_{k-1} + (e0 + cx G1) w_k + e1 w_{k+1} (three taps)
+    Bd = (Phi @ G1 + G0).reshape(-1, 1)
+    Cd = cx.reshape(1, -1)
+    Dd = np.zeros((1, 1))
+    pd = _clean_roots(linalg.eigvals(Phi))
+    zd = _clean_roots(_ss_zeros(Phi, Bd, Cd, Dd))
     near_one = np.concatenate([zd, pd])
     z0 = 1.0 if near_one.size == 0 or np.min(np.abs(1.0 - near_one)) > 1e-9 else 1.7 + 0.3j
-    g0 = (Cd @ np.linalg.solve(z0 * np.eye(n + 2) - Ad, Bd) + Dd)[0, 0]
+    g0 = (Cd @ np.linalg.solve(z0 * np.eye(n) - Phi, Bd))[0, 0]
     kd = float(np.real(g0 * np.prod(z0 - pd) / np.prod(z0 - zd)))
     sos = signal.zpk2sos(zd, pd, kd)
     for _ in range(pd.size - zd.size):   # relative degree as delay, as in zoh_sos
         i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
         sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
-    return sos
+    return sos, np.array([em1, e0 + float(cx @ G1), e1])
 
 
 def blockmean_nodes(u: np.ndarray) -> np.ndarray:

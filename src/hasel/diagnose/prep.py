@@ -407,10 +407,10 @@ class LinearSim:
                 try:
                     with np.errstate(all="ignore"), warnings.catch_warnings():
                         warnings.simplefilter("ignore", signal.BadCoefficients)
-                        sos = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
+                        sos, taps = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
                         zi = signal.sosfilt_zi(sos)
-                    if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)):
-                        self._block = (sos, zi)
+                    if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)) and np.all(np.isfinite(taps)):
+                        self._block = (sos, zi, taps)
                 except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
                     self._block = None  # the hold-and-interpolate simulation below
                 if self._block is not None:
@@ -468,9 +468,14 @@ class LinearSim:
         u = np.asarray(u, float)
         if u.size < 3:
             return at_offset(self.run_start(u), self.offset)
-        sos, zi = self._block
+        sos, zi, (t_prev, t_now, t_next) = self._block
         w = blockmean_nodes(u)
-        y, _ = signal.sosfilt(sos, np.concatenate([w[1:], w[-1:]]), zi=zi * w[0])
+        y, _ = signal.sosfilt(sos, w, zi=zi * w[0])
+        y += t_now * w
+        y[1:] += t_prev * w[:-1]
+        y[0] += t_prev * w[0]
+        y[:-1] += t_next * w[1:]
+        y[-1] += t_next * w[-1]
         return y
 
 
