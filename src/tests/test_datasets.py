@@ -122,8 +122,10 @@ def test_piezo_without_a_model_shows_hysteresis():
     # identified first, a linear model takes the loop's first harmonic as a phase lag; what it cannot
     # take (the loop's odd harmonics, the rest level below the loop's centre) is a rate-independent memory
     d = D.load_piezo()
-    # 100 Hz is a hundred times the excitation (keeps the test short)
-    v = diagnose(d.t_s, d.u, d.y, units=("V", "um"), options=DiagnoseOptions(target_rate_hz=100.0, max_effects=1))
+    # at the default working rate: reduced to 100 Hz (to keep the test short) the validation part is 177
+    # samples in 32 blocks, and the block score of a 97 % removal sat at 3.7-4.0 against 3.9 depending on
+    # how the working-rate model averages blocks (session 12): a coin toss, not a check
+    v = diagnose(d.t_s, d.u, d.y, units=("V", "um"), options=DiagnoseOptions(max_effects=1))
     assert v.names == ["hysteresis"]
     assert v.heldout["nrmse_augmented"] < 0.5 * v.heldout["nrmse_nominal"]
     hy = v.effects[0]["params"]
