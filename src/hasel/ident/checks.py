@@ -535,7 +535,7 @@ def _timing_rival(G: np.ndarray, f: np.ndarray, widen: np.ndarray, c_db: np.ndar
     """Check 9 of the module: the timing offset the held-out data could not refuse, against ``G`` (appends a reason).
 
     ``G`` is the chosen model's response at ``f`` (Hz); ``c_db`` / ``c_deg`` its standard errors (dB, deg).
-    ``spread["timing_rival"]``: one rival ``(model, offset s, (sd_db, sd_deg) or None, held-out NRMSE[, label])``
+    ``spread["timing_rival"]``: one rival ``(model, offset s, (sd_db, sd_deg) or None, held-out NRMSE[, label[, how it fits]])``
     or a list of them (the worst is judged); the label names the rival's order (default "the same order").
     """
     tr = spread.get("timing_rival")
@@ -554,16 +554,17 @@ def _timing_rival(G: np.ndarray, f: np.ndarray, widen: np.ndarray, c_db: np.ndar
         i = int(np.argmax(w))
         if worst is None or w[i] > worst[0]:
             label = t[4] if len(t) > 4 and t[4] else "the same order (a sampling convention)"
-            worst = (float(w[i]), i, tau_r, label, d_db, d_deg, u_db, u_deg)
+            how = t[5] if len(t) > 5 and t[5] else "fits the held-out data as well"
+            worst = (float(w[i]), i, tau_r, label, d_db, d_deg, u_db, u_deg, how)
     if worst is None:
         return
-    wi, i, tau_r, label, d_db, d_deg, u_db, u_deg = worst
+    wi, i, tau_r, label, d_db, d_deg, u_db, u_deg, how = worst
     details.update(timing_rival_offset_s=tau_r, timing_rival_max_db=float(np.max(d_db)),
                    timing_rival_max_deg=float(np.max(d_deg)), timing_rival_ratio=wi)
     if wi > TIMING_FACTOR:
         reasons.append(f"the timing offset between the channels cannot be told from the model's phase: with an "
                        f"offset of {1e3 * tau_r:+.3g} ms instead of "
-                       f"{1e3 * timing_offset_s:+.3g} ms {label} fits the held-out data as well yet its G "
+                       f"{1e3 * timing_offset_s:+.3g} ms {label} {how} yet its G "
                        f"differs by {d_db[i]:.2g} dB / {d_deg[i]:.2g} deg at {f[i]:.3g} Hz (beyond their combined "
                        f"95 % uncertainty +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg and the tolerance "
                        f"{tol_db * widen[i]:.2g} dB / {tol_deg * widen[i]:.2g} deg there)")

@@ -1301,8 +1301,11 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         t_rival = []
         if timing_alt is not None and oe.shift == 0.0:
             sd_t = spread_of(timing_alt, True)
-            t_rival.append((timing_alt.model, -float(timing_alt.shift) / oe_rate, sd_t,
-                            float(timing_alt.nrmse_heldout), None))
+            e_alt, e_kept = float(timing_alt.nrmse_heldout), float(oe.nrmse_heldout)
+            # a soft tie (_timing_or_not): the held-out data lean against the offset, the band's response for it
+            how = (f"fits the held-out data a little worse (NRMSE {e_alt:.3g} against {e_kept:.3g}) but the measured "
+                   f"response in the band better" if e_alt > (1.0 + _TIE) * e_kept else None)
+            t_rival.append((timing_alt.model, -float(timing_alt.shift) / oe_rate, sd_t, e_alt, None, how))
         # the higher order with the offset free, when the lower order kept an offset that is no sampling
         # convention (_lower_order_with_offset)
         if lower_rival is not None:
