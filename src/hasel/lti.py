@@ -16,7 +16,7 @@ from scipy import linalg, signal
 from hasel.errors import BadInputError
 from hasel.validate import positive
 
-__all__ = ["zoh_sos", "blockmean_sos", "blockmean_nodes", "butter2_analog", "critical2_analog", "SosFilter", "tf_freqresp", "is_stable"]
+__all__ = ["zoh_sos", "butter2_analog", "critical2_analog", "SosFilter", "tf_freqresp", "is_stable"]
 
 
 def _as_coeffs(name: str, c: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -150,116 +150,6 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
         i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
         sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
     return sos
-
-
-def blockmean_sos(num: Sequence[float], den: Sequence[float], dt_s: float, q: int,
-                  shift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Working-rate discretisation of ``num(s)/den(s)`` whose output is a mean of ``q`` samples.
-
-    A log sampled ``q`` times faster than the working rate and brought down by block means
-    holds, per working interval ``[t_k, t_k + dt_s)``, the mean input over the block and
-    the mean of the ``q`` instantaneous outputs at ``t_k + j dt_s / q`` (``j = 0 .. q-1``).
-    Here the input is taken piecewise linear through nodes ``w_k`` at the block centres
-    ``t_k + dt_s / 2`` (:func:`blockmean_nodes` makes the nodes from the block means so that
-    each block's integral is exact), and the output is the exact mean of the continuous
-    output at ``t_k + (j / q + shift) dt_s``: no interpolation, no hold of the mean. Against
-    the hold-and-interpolate discretisation, whose gain error is of relative size about
-    ``(2 pi f dt_s)^2 / 6`` at ``f`` Hz, what is left is the input's unknown shape within a
-    block (a step inside a block) and fourth-order terms.
-
-    Parameters
-    ----------
-    num, den : array_like
-        Coefficients in descending powers of s (s in rad/s).
-    dt_s : float
-        Working sample period, s.
-    q : int
-        Original samples per working sample (>= 1).
-    shift : float
-        Extra output shift, working samples (a timing offset); ``|shift| + 1/2 < 1``.
-
-    Returns
-    -------
-    sos : ndarray, shape (n_sections, 6)
-        A strictly proper part, for :func:`scipy.signal.sosfilt` applied to the nodes ``w``.
-    taps : ndarray, shape (3,)
-        Weights of ``w[k-1], w[k], w[k+1]`` added to its output ``k``: the sum is the block mean ``k``.
-    """
-    dt_s = positive("dt_s", dt_s)
-    q = int(q)
-    if q < 1:
-        raise BadInputError(f"q must be a positive whole number, got {q}")
-    tau = (np.arange(q) / q - 0.5 + float(shift)) * dt_s  # sample points relative to the node c_k
-    if np.any(np.abs(tau) >= dt_s):
-        raise BadInputError(f"the output shift {shift} puts samples more than one interval from the node")
-    num_a, den_a = _as_coeffs("num", num), _as_coeffs("den", den)
-    if num_a.size > den_a.size:
-        raise BadInputError("the transfer function must be proper (deg num <= deg den)")
-    z, p, k = signal.tf2zpk(num_a, den_a)
-    A, B, C, D = _series_ss(z, p, float(k))
-    n = A.shape[0]
-    d = float(D[0, 0])
-    # x' = A x + B u with u = u1, u1' = u2 / T, u2' = 0: the responses to a held and to a ramp input
-    M = np.zeros((n + 2, n + 2)); M[:n, :n] = A; M[:n, n:n + 1] = B; M[n, n + 1] = 1.0 / dt_s
-
-    # only C times the augmented exponentials is needed: row vectors advanced one original sample at a time
-    E_T = linalg.expm(M * dt_s)
-    Phi, G0, G1 = E_T[:n, :n], E_T[:n, n] - E_T[:n, n + 1], E_T[:n, n + 1]
-    step = linalg.expm(M * (dt_s / q))
-    c_aug = np.concatenate([C[0], [0.0, 0.0]])
-    E0 = linalg.expm(M * float(tau[0]))
-    r = c_aug @ E0             # C exp(M tau_j)
-    s_ = (c_aug @ E_T) @ E0    # C exp(M (tau_j + T))
-    cx = np.zeros(n); em1 = e0 = e1 = 0.0
-    for t in tau:
-        cx += r[:n]
-        if t >= 0.0:   # between nodes k and k + 1: Gamma0 = F0 - F1, Gamma1 = F1
-            e0 += (r[n] - r[n + 1]) + d * (1.0 - t / dt_s)
-            e1 += r[n + 1] + d * t / dt_s
-        else:          # between nodes k - 1 and k, written from x_k backwards
-            em1 += (s_[n] - s_[n + 1]) - r[:n] @ G0 + d * (-t / dt_s)
-            e0 += s_[n + 1] - r[:n] @ G1 + d * (1.0 + t / dt_s)
-        r = r @ step
-        s_ = s_ @ step
-    cx, em1, e0, e1 = cx / q, em1 / q, e0 / q, e1 / q
-    # x_{k+1} = Phi x_k + G0 w_k + G1 w_{k+1};  y_k = cx x_k + em1 w_{k-1} + e0 w_k + e1 w_{k+1}.
-    # With z_k = x_k - G1 w_k: z_{k+1} = Phi z_k + (Phi G1 + G0) w_k (a strictly proper system of w) and
-    # y_k = cx z_k + em1 w_{k-1} + (e0 + cx G1) w_k + e1 w_{k+1} (three taps)
-    Bd = (Phi @ G1 + G0).reshape(-1, 1)
-    Cd = cx.reshape(1, -1)
-    Dd = np.zeros((1, 1))
-    pd = _clean_roots(linalg.eigvals(Phi))
-    zd = _clean_roots(_ss_zeros(Phi, Bd, Cd, Dd))
-    near_one = np.concatenate([zd, pd])
-    z0 = 1.0 if near_one.size == 0 or np.min(np.abs(1.0 - near_one)) > 1e-9 else 1.7 + 0.3j
-    g0 = (Cd @ np.linalg.solve(z0 * np.eye(n) - Phi, Bd))[0, 0]
-    kd = float(np.real(g0 * np.prod(z0 - pd) / np.prod(z0 - zd)))
-    sos = signal.zpk2sos(zd, pd, kd)
-    for _ in range(pd.size - zd.size):   # relative degree as delay, as in zoh_sos
-        i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
-        sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
-    return sos, np.array([em1, e0 + float(cx @ G1), e1])
-
-
-def blockmean_nodes(u: np.ndarray) -> np.ndarray:
-    """Nodes ``w`` (input unit) of a piecewise-linear input whose block means are ``u``.
-
-    With nodes at the block centres, the mean of the linear interpolant over block ``k`` is
-    ``w[k] + (w[k-1] - 2 w[k] + w[k+1]) / 8``; this solves that tridiagonal system (well
-    conditioned: its smallest gain, at the Nyquist rate, is 1/2) for the input constant beyond
-    both ends, by a causal and an anti-causal first-order recursion (pole ``2 sqrt 2 - 3``).
-    """
-    u = np.asarray(u, float)
-    if u.size < 3:
-        return u.copy()
-    # (w[k-1] + 6 w[k] + w[k+1]) / 8 = g (1 - r z^-1)(1 - r z) w, r = 2 sqrt 2 - 3: a causal and an
-    # anti-causal first-order recursion, each started at rest with the end value
-    r = 2.0 * np.sqrt(2.0) - 3.0
-    g = -1.0 / (8.0 * r)
-    x, _ = signal.lfilter([1.0], [1.0, -r], u, zi=[r * u[0] / (1.0 - r)])
-    x = x[::-1]
-    w, _ = signal.lfilter([1.0], [1.0, -r], x, zi=[r * x[0] / (1.0 - r)])
-    return w[::-1] / g
 
 
 def critical2_analog(cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:

@@ -6,12 +6,8 @@ input is exactly the input held over that block, and input and output are
 filtered alike). A continuous model is simulated with its input held over each working
 interval (a zero-order hold, the convention of a DAC and of this project's plant) and
 its output taken where the log's output sample lies in that interval: at its start for
-an unaveraged zero-order-hold log. For block means of ``q > 1`` samples the simulation
-reproduces the block means themselves (:func:`hasel.lti.blockmean_sos`: the input piecewise
-linear with the given block integrals, the output the exact mean of the ``q`` samples): holding
-each block's mean input and reading the output ``(q - 1) / 2q`` into the interval
-(:attr:`Prepared.sample_offset`) would be off by a gain error of relative size about
-``(2 pi f / rate)^2 / 6``, above the floor of a quiet sensor (``RESULT-h-efree2.md``). Other conventions (a first-order hold, centred
+an unaveraged zero-order-hold log, ``(q - 1) / 2q`` into it for block means of ``q``
+samples (:attr:`Prepared.sample_offset`). Other conventions (a first-order hold, centred
 samples, a fractional-sample offset between the input and output clocks) shift that
 point by up to a sample; the diagnosis estimates the shift as a nuisance
 (:func:`estimate_timing`) and reports it as a timing offset, not as a delay.
@@ -42,11 +38,11 @@ from scipy import signal, stats
 
 from hasel.errors import BadInputError
 from hasel.ident.freqresp import excited_band
-from hasel.lti import blockmean_nodes, blockmean_sos, zoh_sos
+from hasel.lti import zoh_sos
 from hasel.metrics import nrmse
 from hasel.signals import uniform_grid
 
-__all__ = ["Record", "Prepared", "BlockOffset", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
+__all__ = ["Record", "Prepared", "LinearSim", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
            "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
 
 
@@ -74,26 +70,6 @@ class Record:
     def __post_init__(self) -> None:
         if self.valid is None:
             self.valid = np.zeros(self.t_s.size, bool)
-
-
-class BlockOffset(float):
-    """An output sampling offset (working samples) of a log brought down by block means of ``decimation`` samples.
-
-    A plain float to every caller; :class:`LinearSim` reads ``decimation`` from it and then
-    simulates the block means themselves (:func:`hasel.lti.blockmean_sos`) instead of
-    holding each block's mean input and interpolating the output. :class:`Prepared` wraps
-    every offset set on it, so that a refined (timing) offset keeps the decimation.
-    """
-
-    decimation: int
-
-    def __new__(cls, value: float, decimation: int = 1) -> "BlockOffset":
-        obj = super().__new__(cls, value)
-        obj.decimation = int(decimation)
-        return obj
-
-    def __reduce__(self):
-        return (BlockOffset, (float(self), self.decimation))
 
 
 @dataclass
@@ -125,12 +101,6 @@ class Prepared:
     split: str
     info: dict = field(default_factory=dict)
     sample_offset: float = 0.0
-
-    def __setattr__(self, name: str, value) -> None:
-        # the sampling offset of block means carries the decimation to every LinearSim built from it
-        if name == "sample_offset" and self.__dict__.get("decimation", 1) > 1:
-            value = BlockOffset(float(value), self.__dict__["decimation"])
-        super().__setattr__(name, value)
 
     @property
     def dt_s(self) -> float:
@@ -350,10 +320,6 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
                     sample_offset=(q - 1) / (2.0 * q))
 
 
-#: Block-mean discretisations already built (the same model, rate and offset recur across fits).
-_BLOCK_CACHE: dict = {}
-
-
 class LinearSim:
     """Simulate a continuous transfer function on working-rate samples (input held over each interval).
 
@@ -373,11 +339,7 @@ class LinearSim:
     rate_hz : float
         Working rate, Hz.
     offset : float
-        Where in the interval the output is taken, in working samples (-1 to 1). A
-        :class:`BlockOffset` (as :attr:`Prepared.sample_offset` of a log brought down by block
-        means of ``q > 1`` samples) makes :meth:`run` simulate the block means instead
-        (``offset - (q - 1) / 2q`` is then the shift of the ``q`` output samples); a plain
-        float, or ``q`` = 1, keeps the held-input simulation exactly.
+        Where in the interval the output is taken, in working samples (-1 to 1).
     """
 
     def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float, offset: float = 0.0) -> None:
@@ -394,89 +356,32 @@ class LinearSim:
         self.num, self.den, self.offset = num, den, float(offset)
         self.dc_gain = float(np.polyval(num, 0.0) / np.polyval(den, 0.0))
         num = np.trim_zeros(num, "f") if np.any(num) else num[-1:]
-        self._model = (num, den, float(rate_hz))
-        self._sos = self._zi = None
-        # block means of q > 1 original samples (a BlockOffset): simulate the block means themselves
-        self.decimation = max(1, int(getattr(offset, "decimation", 1)))
-        self._block = None
-        if self.decimation > 1:
-            q = self.decimation
-            key = (num.tobytes(), den.tobytes(), float(rate_hz), q, self.offset)
-            self._block = _BLOCK_CACHE.get(key)
-            if self._block is None:
-                try:
-                    with np.errstate(all="ignore"), warnings.catch_warnings():
-                        warnings.simplefilter("ignore", signal.BadCoefficients)
-                        sos, taps = blockmean_sos(num, den, 1.0 / rate_hz, q, self.offset - (q - 1) / (2.0 * q))
-                        zi = signal.sosfilt_zi(sos)
-                    if np.all(np.isfinite(sos)) and np.all(np.isfinite(zi)) and np.all(np.isfinite(taps)):
-                        self._block = (sos, zi, taps)
-                except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
-                    self._block = None  # the hold-and-interpolate simulation below
-                if self._block is not None:
-                    if len(_BLOCK_CACHE) > 256:
-                        _BLOCK_CACHE.clear()
-                    _BLOCK_CACHE[key] = self._block
-        if self._block is None:
-            self._build_zoh()   # (with block means it is built only if run_start is called)
-
-    def _build_zoh(self) -> None:
-        """The zero-order-hold discretisation (``sos``, interval-start outputs) at the working rate."""
-        num, den, rate_hz = self._model
         try:
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", signal.BadCoefficients)
-                sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
-            if not np.all(np.isfinite(sos)):
+                self.sos = zoh_sos(num, den, 1.0 / rate_hz, output="start")
+            if not np.all(np.isfinite(self.sos)):
                 raise ValueError("non-finite sections")
         except (StopIteration, ValueError, np.linalg.LinAlgError):
             # zeros at s = 0 or extreme pole spreads: plain ZOH through the polynomial form
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", signal.BadCoefficients)
                 numd, dend, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method="zoh")
-                sos = signal.tf2sos(np.atleast_1d(np.squeeze(numd)), dend)
-            if not np.all(np.isfinite(sos)):
+                self.sos = signal.tf2sos(np.atleast_1d(np.squeeze(numd)), dend)
+            if not np.all(np.isfinite(self.sos)):
                 raise BadInputError("the model cannot be discretised at the working rate (non-finite result)")
-        self._sos, self._zi = sos, signal.sosfilt_zi(sos)
-
-    @property
-    def sos(self) -> np.ndarray:
-        """Second-order sections of the zero-order-hold discretisation (interval-start outputs)."""
-        if self._sos is None:
-            self._build_zoh()
-        return self._sos
+        self._zi = signal.sosfilt_zi(self.sos)
 
     def run_start(self, u: np.ndarray) -> np.ndarray:
         """Output at the interval starts, ``n + 1`` samples (the last one after ``u[-1]``'s interval)."""
         u = np.asarray(u, float)
         x = np.concatenate([u, u[-1:]])
-        sos = self.sos
-        ys, _ = signal.sosfilt(sos, x, zi=self._zi * u[0])
+        ys, _ = signal.sosfilt(self.sos, x, zi=self._zi * u[0])
         return ys
 
     def run(self, u: np.ndarray) -> np.ndarray:
-        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before).
-
-        For block means (``decimation`` q > 1, see :class:`BlockOffset`): the mean of the ``q``
-        outputs in each interval, ``offset - (q - 1) / 2q`` working samples later than the
-        original samples, for the input piecewise linear with the given block means
-        (:func:`hasel.lti.blockmean_sos`). Otherwise the input is held over each interval and
-        the output read ``offset`` into it.
-        """
-        if self._block is None:
-            return at_offset(self.run_start(u), self.offset)
-        u = np.asarray(u, float)
-        if u.size < 3:
-            return at_offset(self.run_start(u), self.offset)
-        sos, zi, (t_prev, t_now, t_next) = self._block
-        w = blockmean_nodes(u)
-        y, _ = signal.sosfilt(sos, w, zi=zi * w[0])
-        y += t_now * w
-        y[1:] += t_prev * w[:-1]
-        y[0] += t_prev * w[0]
-        y[:-1] += t_next * w[1:]
-        y[-1] += t_next * w[-1]
-        return y
+        """Output at the working samples for input ``u`` (at rest with ``u[0]`` before)."""
+        return at_offset(self.run_start(u), self.offset)
 
 
 def at_offset(ys: np.ndarray, offset: float) -> np.ndarray:
