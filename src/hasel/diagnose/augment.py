@@ -29,8 +29,12 @@ hysteresis          input                   Prandtl-Ishlinskii:
                                             starts on; a memory of what came before)
 load_mass           model                   inertia of G's resonances (or its slowest
                                             real pole) times ``1 + mu``, gain ``kappa``;
-                                            ``model:sag``: and a static offset
-                                            ``<= 0`` (the load's weight compresses)
+                                            ``model:zeta``: their frequency over
+                                            ``sqrt(1 + mu)``, damping ratio kept;
+                                            ``model:damp``: frequency over
+                                            ``sqrt(1 + mu)``, damping ratio times
+                                            ``delta``; ``...:sag``: and a static
+                                            offset ``<= 0`` (the load's weight)
 asymmetric_dynamics output                  first-order lag, one time constant while
                                             the output rises, another while it falls
                                             (log-linear in the level); or
@@ -74,7 +78,7 @@ from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonline
                                   monomial, monomials, poly_map, rate_grid, sumsq)
 from hasel.effects.hysteresis import HYST_THRESHOLDS
 from hasel.effects.hysteresis import branch as _branch
-from hasel.effects.load import LOAD_SAG_MIN_MU, keeps_zeta, loaded_den  # noqa: F401
+from hasel.effects.load import LOAD_SAG_MIN_MU, damping_factor, keeps_zeta, load_offset, loaded_den  # noqa: F401
 from hasel.effects.operators import play
 from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
@@ -146,19 +150,23 @@ class Pipeline:
 
     # -- linear model with load --------------------------------------------------------------
     def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None,
-               zeta_kept: bool = False) -> LinearSim:
+               zeta_kept: bool = False, damping: float | None = None) -> LinearSim:
         """The model (``lin``, a re-identified linear part, or the nominal) with ``1 + mu`` times
         the inertia of its resonances (``zeta_kept``: their frequency lowered, damping ratio kept;
+        ``damping``: their frequency over ``sqrt(1 + mu)`` and their damping ratio times ``damping``;
         :func:`hasel.effects.load.loaded_den`) (cached), times the gain ``kappa``."""
         base = ("nominal",) if lin is None else lin.theta
-        key = (round(mu, 12), bool(zeta_kept) and mu != 0.0) + base
+        if damping is not None and damping == 1.0 and mu == 0.0:
+            damping = None
+        key = (round(mu, 12), bool(zeta_kept) and mu != 0.0,
+               None if damping is None else round(float(damping), 12)) + base
         sim = self._lin.get(key)
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
-            if mu == 0.0:
+            if mu == 0.0 and damping is None:
                 sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz, self.prep.sample_offset)
             else:
-                sim = LinearSim(num, loaded_den(den, mu, zeta_kept=zeta_kept), self.prep.rate_hz,
+                sim = LinearSim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping), self.prep.rate_hz,
                                 self.prep.sample_offset)
             if len(self._lin) > 64:
                 self._lin.clear()
@@ -171,7 +179,8 @@ class Pipeline:
         """The linear part of the chain for ``effects`` (re-identified model and load included)."""
         f = effects.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
-        return self.loaded(mu, kappa, effects.get(LINEAR), f is not None and keeps_zeta(f))
+        return self.loaded(mu, kappa, effects.get(LINEAR), f is not None and keeps_zeta(f),
+                           damping_factor(f) if f is not None else None)
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -237,13 +246,14 @@ class Pipeline:
         f = e.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
         zk = f is not None and keeps_zeta(f)
+        dk = damping_factor(f) if f is not None else None
         lin = e.get(LINEAR)
-        key += ("l", mu, kappa, zk) + (lin.theta if lin is not None else ())
-        sim = self.loaded(mu, kappa, lin, zk)
+        key += ("l", mu, kappa, zk, dk) + (lin.theta if lin is not None else ())
+        sim = self.loaded(mu, kappa, lin, zk, dk)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
-        if f is not None and len(f.theta) > 2:  # the load's weight: a static offset (a sag)
-            key += ("sag",) + f.theta[2:]
-            y = y + f.theta[2]
+        if f is not None and "sag" in f.variant.split(":"):  # the load's weight: a static offset (a sag)
+            key += ("sag", load_offset(f))
+            y = y + load_offset(f)
         out["y_lin"] = y
         f = e.get("static_nonlinearity")
         if f is not None and f.variant == "internal":

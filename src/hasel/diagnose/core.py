@@ -927,7 +927,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {_pct(me['linear_share'])} of "
                       f"the residual, significant in {band_txt}): the resonance and gain moved "
                       f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g}"
-                      + (f", and the load's weight offsets the output by {fit.theta[2]:+.3g})" if len(fit.theta) > 2
+                      + (f", and the load's weight offsets the output by {fit.theta[-1]:+.3g})" if "sag" in fit.variant
                          else ")")),
         "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "

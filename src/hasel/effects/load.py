@@ -12,6 +12,12 @@ Forms
   with it; the inertia form lowers the damping ratio too). A load on the tuning logs
   (``bench/tune_diag/loads.py``) of this form was fitted by the inertia form alone only as a
   raised resonance beside a delay, and named ``time_delay``.
+- generic ``model:damp`` (``model:damp:sag``; ``theta = (mu, kappa, delta[, sag])``): the resonances'
+  frequency divided by ``sqrt(1 + mu)`` and their damping ratio times ``delta`` (a change of the mount's
+  damping, with or without a change of its mass or stiffness: the payload's mount stiffened by glue or
+  a damper, a softer or a more lossy support). It nests the two forms above (``delta = 1/sqrt(1 + mu)``
+  is the inertia form, ``delta = 1`` the damping-ratio-kept one) and is taken in their place only when
+  its one more parameter lowers the training BIC and the magnitude near the resonance shows it.
 
 Both transform the linear model with :func:`loaded_den`; the load acts in the
 ``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
@@ -31,8 +37,8 @@ from hasel.effects.fitkit import _refine, _sse, _with, sumsq
 from hasel.effects.operators import scale_resonances
 from hasel.validate import finite, in_range, positive
 
-__all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "LinearStage", "LoadFamily", "FAMILY",
-           "resonance_signature"]
+__all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "load_offset", "LinearStage",
+           "LoadFamily", "FAMILY", "resonance_signature", "DAMP_MIN", "DAMP_MAX"]
 
 #: Least change of the inertia (``|mu|``) for a load to carry a static offset (its weight's sag).
 LOAD_SAG_MIN_MU = 0.1
@@ -40,6 +46,13 @@ LOAD_SAG_MIN_MU = 0.1
 #: the form is a slow low-pass that took a lag, a drift and an input map's place (``bench/tune_diag/combos.py``
 #: seed 21, case 3: mu 4.8); the loads of ``loads.py`` need 0.3-0.8.
 ZETA_MU_MAX = 2.0
+#: Range of the damping-ratio factor ``delta`` of the ``model:damp`` form: a mount's damping ratio a quarter
+#: to four times the model's (the tuning loads of ``bench/tune_diag/multi2.py``, ``damping``: 0.35-2.5).
+DAMP_MIN, DAMP_MAX = 0.25, 4.0
+#: Starting damping factors of the ``model:damp`` form's grid (a less and a more damped mount).
+DAMP_GRID = (0.45, 0.7, 1.5, 2.2)
+#: Whether the diagnosis tries the ``model:damp`` form (a switch for measuring it against the two older forms).
+DAMP_FORM = True
 
 
 @dataclass(frozen=True)
@@ -95,17 +108,44 @@ def keeps_zeta(fit: EffectFit) -> bool:
     return "zeta" in fit.variant.split(":")
 
 
-def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: bool = False) -> np.ndarray:
+def damping_factor(fit: EffectFit) -> float | None:
+    """The damping-ratio factor ``delta`` of a ``model:damp[:sag]`` load fit (dimensionless), else None."""
+    return float(fit.theta[2]) if "damp" in fit.variant.split(":") else None
+
+
+def load_offset(fit: EffectFit) -> float:
+    """The static offset (a sag, output unit, ``<= 0``) of a ``...:sag`` load fit, else 0."""
+    return float(fit.theta[-1]) if "sag" in fit.variant.split(":") else 0.0
+
+
+def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: bool = False,
+               damping: float | None = None) -> np.ndarray:
     """``den`` (descending powers of s) with ``1 + mu`` times the inertia of its resonances.
 
     Each complex pole pair's ``s^2`` term is multiplied (natural frequency and damping ratio
     fall by ``sqrt(1 + mu)``); with ``zeta_kept`` each complex pole is divided by ``sqrt(1 + mu)``
     instead (the natural frequency falls by that factor, the damping ratio is kept: a mass whose
     mount's damping grows with it). Without a resonance the slowest real pole is divided by
-    ``1 + mu`` (both forms). The DC value ``den(0)`` is kept (``rescale``: also against the
-    rounding of the factorisation; the truth plant leaves it, its numbers predate the rescaling).
+    ``1 + mu`` (both forms). With ``damping`` (``delta``, dimensionless) each complex pair
+    ``s^2 + 2 zeta w s + w^2`` becomes ``s^2 + 2 (delta zeta) (w / sqrt(1 + mu)) s + w^2 / (1 + mu)``:
+    the frequency falls by ``sqrt(1 + mu)`` and the damping ratio is multiplied by ``delta`` (it may
+    pass 1: two real poles); real poles are kept. The DC value ``den(0)`` is kept (``rescale``: also
+    against the rounding of the factorisation; the truth plant leaves it, its numbers predate the
+    rescaling).
     """
     den = np.asarray(den, float)
+    if damping is not None:
+        p = np.roots(den)
+        tol = 1e-9 * np.maximum(1.0, np.abs(p))
+        if np.any(p.imag > tol) and (mu != 0.0 or damping != 1.0):
+            den2 = np.array([den[0]])
+            for r in p[np.abs(p.imag) <= tol]:
+                den2 = np.polymul(den2, [1.0, -r.real])
+            k = 1.0 / math.sqrt(1.0 + mu)
+            for r in p[p.imag > tol]:
+                den2 = np.polymul(den2, [1.0, -2.0 * r.real * damping * k, abs(r) ** 2 * k * k])
+            den2 = np.real(den2)
+            return den2 * (den[-1] / den2[-1])
     if mu == 0.0:
         return den.copy()
     p = np.roots(den)
@@ -195,6 +235,53 @@ def _magnitude_shown(pipe: FitContext, effects: dict[str, EffectFit], fit: Effec
     return magnitude_evidence(pipe, effects, _with(effects, fit), den)["shown"]
 
 
+def _kappa_ls(pipe: FitContext, effects: dict[str, EffectFit], variant: str, head: tuple[float, ...],
+              tail: tuple[float, ...] = ()) -> EffectFit:
+    """The load ``variant`` with ``theta = head + (kappa,) + tail``, ``kappa`` by least squares (it enters linearly
+    when nothing nonlinear is downstream: ``y_new = kappa * y_lin + rest``), clipped to ``[0.05, 20]``."""
+    base = _with(effects, EffectFit("load_mass", variant, head + (1.0,) + tail))
+    cols, rhs = [], []
+    for ri, rec in enumerate(pipe.prep.records):
+        if rec.train.any():
+            st = pipe.stages(base, ri)
+            cols.append(st["y_lin"][rec.train])
+            rhs.append((rec.y - st["y"] + st["y_lin"])[rec.train])
+    a, b = np.concatenate(cols), np.concatenate(rhs)
+    kappa = float(np.clip(np.einsum("i,i->", a, b) / max(sumsq(a), 1e-300), 0.05, 20.0))
+    return EffectFit("load_mass", variant, head + (kappa,) + tail)
+
+
+def _has_resonance(pipe: FitContext) -> bool:
+    """Whether the model's denominator (``pipe.den``) has a complex pole pair."""
+    den = getattr(pipe, "den", None)
+    if den is None:
+        return False
+    p = np.roots(np.asarray(den, float))
+    return bool(np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))))
+
+
+def _fit_damp(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
+    """The ``model:damp`` form (frequency over ``sqrt(1 + mu)``, damping ratio times ``delta``) in place of the
+    two-parameter ``fit`` when its one more parameter lowers the training BIC (noise variance unknown) and
+    the magnitude near the resonance shows it (:func:`_magnitude_shown`); else ``fit``."""
+    mu0, kappa0 = fit.theta[:2]
+    # the nested start (the same response as fit) and a grid of damping factors at the nominal frequency
+    # and at a 9 % lower one
+    starts = [EffectFit("load_mass", "model:damp",
+                        (mu0, kappa0, 1.0 if keeps_zeta(fit) else 1.0 / math.sqrt(1.0 + mu0)))]
+    starts += [_kappa_ls(pipe, effects, "model:damp", (m,), (d,)) for m in (0.0, 0.2) for d in DAMP_GRID]
+    costs = [_sse(pipe, _with(effects, f)) for f in starts]
+    f0 = starts[int(np.argmin(costs))]
+    lo, hi = FAMILY.bounds(pipe, f0)
+    f0 = EffectFit("load_mass", "model:damp", tuple(map(float, np.clip(f0.theta, lo, hi))))
+    damp = _refine(pipe, effects, f0, lo, hi, max_nfev=30, x_scale=np.array([0.1, 0.1, 0.2]))
+    n = pipe.residuals(_with(effects, fit), "train").size
+    s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, damp))
+    if n > 1 and s1 > 0 and n * math.log(s0 / s1) > math.log(n) and _magnitude_shown(pipe, effects, damp):
+        return damp
+    return fit
+
+
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best: dict[str, tuple[float, EffectFit]] = {}
     # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; each form's
@@ -202,17 +289,7 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
     # whose inertia form needed mu 3.9, beyond the grid, to a delay: combos.py seed 21, case 21)
     grid = (-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.6, 1.0, 2.0)
     for variant, mu in [("model", m) for m in grid] + [("model:zeta", m) for m in grid if m != 0.0]:
-        base = _with(effects, EffectFit("load_mass", variant, (mu, 1.0)))
-        # kappa enters linearly when nothing nonlinear is downstream: y_new = kappa * y_lin + rest
-        cols, rhs = [], []
-        for ri, rec in enumerate(pipe.prep.records):
-            if rec.train.any():
-                st = pipe.stages(base, ri)
-                cols.append(st["y_lin"][rec.train])
-                rhs.append((rec.y - st["y"] + st["y_lin"])[rec.train])
-        a, b = np.concatenate(cols), np.concatenate(rhs)
-        kappa = float(np.clip(np.einsum("i,i->", a, b) / max(sumsq(a), 1e-300), 0.05, 20.0))
-        fit = EffectFit("load_mass", variant, (mu, kappa))
+        fit = _kappa_ls(pipe, effects, variant, (mu,))
         c = _sse(pipe, _with(effects, fit))
         if variant not in best or c < best[variant][0]:
             best[variant] = (c, fit)
@@ -224,6 +301,8 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         # taken only where the measured magnitude there moved and it explains the move, else it stood in
         # for a delay beside two maps (combos.py seed 21, case 9: mu 1.2 with a 0.7 mm sag)
         fit = next(f for f in refined if not keeps_zeta(f))
+    if DAMP_FORM and _has_resonance(pipe):
+        fit = _fit_damp(pipe, effects, fit)
     # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
     # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
     # kept when it lowers the training BIC (one more parameter, noise variance unknown)
@@ -231,12 +310,12 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
     if r.size > 1 and r.mean() < 0 and abs(fit.theta[0]) >= LOAD_SAG_MIN_MU:
         sag = EffectFit("load_mass", fit.variant + ":sag", fit.theta + (float(r.mean()),))
         lo, hi = FAMILY.bounds(pipe, sag)
-        sag = _refine(pipe, effects, sag, lo, hi, max_nfev=15, x_scale=np.array([0.1, 0.1, 0.1 * pipe.y_s]))
+        sag = _refine(pipe, effects, sag, lo, hi, max_nfev=15,
+                      x_scale=np.array([0.1] * len(fit.theta) + [0.1 * pipe.y_s]))
         s0, s1 = sumsq(r), _sse(pipe, _with(effects, sag))
         if abs(sag.theta[0]) >= LOAD_SAG_MIN_MU and s1 > 0 and r.size * math.log(s0 / s1) > math.log(r.size):
             return sag
     return fit
-
 
 
 class LoadFamily(EffectFamily):
@@ -251,19 +330,21 @@ class LoadFamily(EffectFamily):
                         "resonance's magnitude in proportion to the mass, another change of the dynamics does not")
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
-        """``("mass_ratio", "gain_factor"[, "offset"])``."""
-        return ("mass_ratio", "gain_factor", "offset")[:len(fit.theta)]
+        """``("mass_ratio", "gain_factor"[, "damping_factor"][, "offset"])``."""
+        return (("mass_ratio", "gain_factor") + (("damping_factor",) if damping_factor(fit) is not None else ())
+                + (("offset",) if "sag" in fit.variant.split(":") else ()))
 
     def transform(self, num, den, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """The linear model ``num/den`` with the load: heavier resonances, gain ``kappa``."""
+        """The linear model ``num/den`` with the load: heavier (or otherwise damped) resonances, gain ``kappa``."""
         mu, kappa = fit.theta[:2]
-        return np.asarray(num, float) * kappa, loaded_den(den, mu, zeta_kept=keeps_zeta(fit))
+        return np.asarray(num, float) * kappa, loaded_den(den, mu, zeta_kept=keeps_zeta(fit),
+                                                          damping=damping_factor(fit))
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LinearStage:
         """The loaded linear model ``scales.num/den`` (the nominal) with its gain and sag."""
         num, den = getattr(scales, "num"), getattr(scales, "den")
-        return LinearStage(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit)), dt_s, gain=fit.theta[1],
-                           offset=fit.theta[2] if len(fit.theta) > 2 else 0.0)
+        return LinearStage(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit), damping=damping_factor(fit)),
+                           dt_s, gain=fit.theta[1], offset=load_offset(fit))
 
     def truth_stage(self, effect: Effect, dt_s: float) -> SagStage:
         """The sag (the heavier resonances are :meth:`LoadMass.loaded_den` of the plant's model)."""
@@ -275,24 +356,45 @@ class LoadFamily(EffectFamily):
         return _fit_load(ctx, effects)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """``-0.8 <= mu <= 10`` (damping-ratio-kept form: ``mu <= ZETA_MU_MAX``), ``0.05 <= kappa <= 20``,
-        ``sag <= 0``."""
-        hi_mu = ZETA_MU_MAX if keeps_zeta(fit) else 10.0
-        if fit.n_params > 2:
-            return np.array([-0.8, 0.05, -np.inf]), np.array([hi_mu, 20.0, 0.0])
-        return np.array([-0.8, 0.05]), np.array([hi_mu, 20.0])
+        """``-0.8 <= mu <= 10`` (damping-ratio-kept and damping forms: ``mu <= ZETA_MU_MAX``),
+        ``0.05 <= kappa <= 20``, ``DAMP_MIN <= delta <= DAMP_MAX``, ``sag <= 0``."""
+        damp = damping_factor(fit) is not None
+        hi_mu = ZETA_MU_MAX if keeps_zeta(fit) or damp else 10.0
+        lo, hi = [-0.8, 0.05], [hi_mu, 20.0]
+        if damp:
+            lo.append(DAMP_MIN)
+            hi.append(DAMP_MAX)
+        if "sag" in fit.variant.split(":"):
+            lo.append(-np.inf)
+            hi.append(0.0)
+        return np.array(lo), np.array(hi)
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
-        """Mass ratio, gain factor, the resonance's factor and the sag (output unit)."""
+        """Mass ratio, gain factor, the resonance's factor (frequency, dimensionless), the damping factor and the
+        damping ratios (dimensionless, ``model:damp``) and the sag (output unit)."""
         th = fit.theta
+        d = damping_factor(fit)
         out: dict = {"variant": fit.variant, "form": ("resonances' frequency lowered, damping ratio kept"
                                                       if keeps_zeta(fit) else
+                                                      "resonances' frequency over sqrt(1 + mass_ratio), damping ratio "
+                                                      "times damping_factor (the mount's damping changed)"
+                                                      if d is not None else
                                                       "resonances' inertia: frequency and damping ratio fall together"),
                      "mass_ratio": th[0], "gain_factor": th[1],
                      "resonance_factor": 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")}
-        if len(th) > 2:
-            out["offset"] = th[2]
+        if d is not None:
+            out["damping_factor"] = d
+            den = getattr(ctx, "den", None)
+            if den is not None:
+                p = np.roots(np.asarray(den, float))
+                c = p[p.imag > 1e-9 * np.maximum(1.0, np.abs(p))]
+                if c.size:
+                    z0 = float(-c[np.argmin(np.abs(c))].real / np.abs(c[np.argmin(np.abs(c))]))
+                    out["damping_ratio_model"] = z0
+                    out["damping_ratio_loaded"] = z0 * d
+        if "sag" in fit.variant.split(":"):
+            out["offset"] = load_offset(fit)
             out["offset_unit"] = units[1]
             out["offset_note"] = "a static offset beside the changed dynamics: the load's weight compresses"
         return out
