@@ -60,7 +60,7 @@ from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, prepare
 from hasel.diagnose.where import analyse
 from hasel.effects.evidence import magnitude_evidence
-from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
+from hasel.effects.load import LOAD_SAG_MIN_MU, load_offset, loaded_den
 from hasel.effects.registry import family
 from hasel.errors import BadInputError, HaselError
 
@@ -927,7 +927,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {_pct(me['linear_share'])} of "
                       f"the residual, significant in {band_txt}): the resonance and gain moved "
                       f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g}"
-                      + (f", and the load's weight offsets the output by {fit.theta[-1]:+.3g})" if "sag" in fit.variant
+                      + (f", and the load's weight offsets the output by {load_offset(fit):+.3g})" if "sag" in fit.variant.split(":")
                          else ")")),
         "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "

@@ -34,7 +34,8 @@ import numpy as np
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import _refine, _sse, _with, sumsq
-from hasel.effects.operators import scale_resonances
+from hasel.effects.evidence import resonance_hz
+from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
 
 __all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "load_offset", "LinearStage",
@@ -134,18 +135,10 @@ def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: b
     rescaling).
     """
     den = np.asarray(den, float)
-    if damping is not None:
-        p = np.roots(den)
-        tol = 1e-9 * np.maximum(1.0, np.abs(p))
-        if np.any(p.imag > tol) and (mu != 0.0 or damping != 1.0):
-            den2 = np.array([den[0]])
-            for r in p[np.abs(p.imag) <= tol]:
-                den2 = np.polymul(den2, [1.0, -r.real])
-            k = 1.0 / math.sqrt(1.0 + mu)
-            for r in p[p.imag > tol]:
-                den2 = np.polymul(den2, [1.0, -2.0 * r.real * damping * k, abs(r) ** 2 * k * k])
-            den2 = np.real(den2)
-            return den2 * (den[-1] / den2[-1])
+    if damping is not None and (mu != 0.0 or damping != 1.0) and math.isfinite(resonance_hz(den)):
+        k = 1.0 / math.sqrt(1.0 + mu)
+        den2 = map_resonances(den, lambda r: (1.0, -2.0 * r.real * damping * k, abs(r) ** 2 * k * k))
+        return den2 * (den[-1] / den2[-1])
     if mu == 0.0:
         return den.copy()
     p = np.roots(den)
@@ -254,10 +247,7 @@ def _kappa_ls(pipe: FitContext, effects: dict[str, EffectFit], variant: str, hea
 def _has_resonance(pipe: FitContext) -> bool:
     """Whether the model's denominator (``pipe.den``) has a complex pole pair."""
     den = getattr(pipe, "den", None)
-    if den is None:
-        return False
-    p = np.roots(np.asarray(den, float))
-    return bool(np.any(np.abs(p.imag) > 1e-9 * np.maximum(1.0, np.abs(p))))
+    return den is not None and math.isfinite(resonance_hz(den))
 
 
 def _fit_damp(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
@@ -390,7 +380,8 @@ class LoadFamily(EffectFamily):
                 p = np.roots(np.asarray(den, float))
                 c = p[p.imag > 1e-9 * np.maximum(1.0, np.abs(p))]
                 if c.size:
-                    z0 = float(-c[np.argmin(np.abs(c))].real / np.abs(c[np.argmin(np.abs(c))]))
+                    r = c[np.argmin(np.abs(c))]  # the lowest resonance (resonance_hz's)
+                    z0 = float(-r.real / np.abs(r))
                     out["damping_ratio_model"] = z0
                     out["damping_ratio_loaded"] = z0 * d
         if "sag" in fit.variant.split(":"):

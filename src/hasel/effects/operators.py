@@ -22,7 +22,7 @@ from collections import deque
 
 import numpy as np
 
-__all__ = ["play", "BoucWen", "asymmetric_lag", "scale_resonances", "DelayLine", "DelayStage", "monotone_runs", "rate_limited",
+__all__ = ["play", "BoucWen", "asymmetric_lag", "scale_resonances", "map_resonances", "DelayLine", "DelayStage", "monotone_runs", "rate_limited",
            "rate_step"]
 
 
@@ -485,6 +485,24 @@ def asymmetric_lag(x: np.ndarray, dt_s: float, tau_up_s: float, tau_down_s: floa
     return _lag_loop_linear_level(xs, z, a_up, dt_s, tau_down_s, level_dependence, level_ref)
 
 
+def map_resonances(den: np.ndarray, pair) -> np.ndarray:
+    """Denominator (descending powers of s) with each complex pole pair's factor replaced.
+
+    The real poles' factors ``s - p`` and the leading coefficient are kept; each complex pole
+    ``r`` (upper half-plane) gives the quadratic ``pair(r) = (a2, a1, a0)``, i.e.
+    ``a2 s^2 + a1 s + a0``, in place of ``s^2 - 2 Re(r) s + |r|^2``.
+    """
+    d = np.asarray(den, float)
+    roots = np.roots(d)
+    out = np.array([d[0]])
+    tol = 1e-9 * np.maximum(1.0, np.abs(roots))
+    for r in roots[np.abs(roots.imag) <= tol]:
+        out = np.polymul(out, [1.0, -r.real])
+    for r in roots[roots.imag > tol]:
+        out = np.polymul(out, list(pair(r)))
+    return np.real(out)
+
+
 def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:
     """Denominator with the ``s^2`` term of each complex pole pair multiplied.
 
@@ -503,17 +521,7 @@ def scale_resonances(den: np.ndarray, inertia_factor: float) -> np.ndarray:
     -------
     ndarray
     """
-    d = np.asarray(den, float)
-    roots = np.roots(d)
-    lead = d[0]
-    out = np.array([lead])
-    tol = 1e-9 * np.maximum(1.0, np.abs(roots))
-    for r in roots[np.abs(roots.imag) <= tol]:
-        out = np.polymul(out, [1.0, -r.real])
-    for r in roots[roots.imag > tol]:
-        a, b = -2.0 * r.real, abs(r) ** 2
-        out = np.polymul(out, [inertia_factor, a, b])
-    return np.real(out)
+    return map_resonances(den, lambda r: (inertia_factor, -2.0 * r.real, abs(r) ** 2))
 
 
 class DelayStage:
