@@ -680,7 +680,7 @@ _TIE = 0.02
 
 def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
                    block: int, floor: float | None, measured: FreqResp | None, band: tuple[float, float],
-                   notes: list[str], max_shift: float) -> tuple[Any, Any]:
+                   notes: list[str], max_shift: float) -> tuple[Any, Any, bool]:
     """Refit the chosen order with a timing offset (at most ``max_shift`` samples); keep it only if the data ask.
 
     A sub-sample lag and a slightly different pole pair near the band's top look alike
@@ -693,11 +693,13 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     error grows by more than the tie margin nor the disagreement by 20 %, and the
     estimate is not at its bound (95 % of ``max_shift``).
 
-    Returns the kept fit and, when the data did not decide (neither criterion better
+    Returns the kept fit; when the data did not decide (neither criterion better
     nor worse, or one better and the other worse; the estimate inside its bound: a tie),
-    the fit not kept with its offset
-    (else None): check 9 of :mod:`hasel.ident.checks` judges whether the two ``G``
-    differ by more than the tolerance.
+    the fit not kept with its offset (else None): check 9 of :mod:`hasel.ident.checks`
+    judges whether the two ``G`` differ by more than the tolerance; and whether that tie
+    leans against the offset (its held-out model error, the noise's share taken out,
+    larger by more than the tie margin while the in-band disagreement is smaller), for the
+    reason's wording.
     """
     # the chosen order was fitted on the zero-order-hold convention (an offset estimated alongside every
     # candidate order let the selection over-fit noise-free or non-rational logs); now with the offset free
@@ -725,7 +727,7 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
         notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                      f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
                      f"in-band disagreement {c_free:.3g} against {c_zero:.3g}")
-        return oe, None
+        return oe, None, False
     notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms"
                  f"{', at its bound' if at_bound else ''}) changes the held-out "
                  f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
@@ -740,7 +742,8 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
     # RESULT_e-notch.md); check 9 then judges whether the two models differ
     soft = (e_free > (1.0 + _TIE) * e_zero and math.isfinite(c_zero) and c_free < (1.0 - _SOFT_INBAND) * c_zero)
     tie = (not better and not worse) or (better and worse) or soft
-    return oe0, (oe if tie and not at_bound else None)
+    leans_against = e_free > (1.0 + _TIE) * e_zero and math.isfinite(c_zero) and c_free < c_zero
+    return oe0, (oe if tie and not at_bound else None), bool(tie and not at_bound and leans_against)
 
 
 #: In-band disagreement share by which a timing offset that the held-out error rejects must still improve the
@@ -1263,7 +1266,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     nz, n_p, start, oe, _ = min(ok, key=lambda c: (c[1], c[0]))
     floor, floor_how = (_noise_floor(yy, segs, fr, oe_block, yd_all, oe.y_hat, pieces, band, oe_rate)
                         if hold > 0 else (None, ""))
-    timing_alt, lower_rival = None, None
+    timing_alt, lower_rival, alt_leans_against = None, None, False
     if max_shift > 0 and hold > 0 and math.isfinite(oe.nrmse_heldout):
         lower, lower_rival = (_lower_order_with_offset(candidates, (nz, n_p), best, ud_all, yd_all, oe_rate, pieces,
                                                        opts, oe_block, max_shift, notes)
@@ -1271,7 +1274,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         if lower is not None:
             nz, n_p, start, oe = lower
         else:
-            oe, timing_alt = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data,
+            oe, timing_alt, alt_leans_against = _timing_or_not(oe, ud_all, yd_all, oe_rate, pieces, opts, oe_block, floor, fit_data,
                                             band, notes, max_shift)
     # after the timing choice: a refit without the offset may bring back a far right-half-plane zero
     oe, rhp_shown = _reflect_unsupported_zeros(oe, band, ud_all, yd_all, oe_rate, pieces, opts, oe_block, notes)
@@ -1302,9 +1305,10 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
         if timing_alt is not None and oe.shift == 0.0:
             sd_t = spread_of(timing_alt, True)
             e_alt, e_kept = float(timing_alt.nrmse_heldout), float(oe.nrmse_heldout)
-            # a soft tie (_timing_or_not): the held-out data lean against the offset, the band's response for it
+            # a tie that leans against the offset (_timing_or_not decides it on the noise-removed errors): the
+            # held-out data a little against it, the band's response for it
             how = (f"fits the held-out data a little worse (NRMSE {e_alt:.3g} against {e_kept:.3g}) but the measured "
-                   f"response in the band better" if e_alt > (1.0 + _TIE) * e_kept else None)
+                   f"response in the band better" if alt_leans_against else None)
             t_rival.append((timing_alt.model, -float(timing_alt.shift) / oe_rate, sd_t, e_alt, None, how))
         # the higher order with the offset free, when the lower order kept an offset that is no sampling
         # convention (_lower_order_with_offset)
