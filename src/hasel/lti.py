@@ -16,7 +16,7 @@ from scipy import linalg, signal
 from hasel.errors import BadInputError
 from hasel.validate import positive
 
-__all__ = ["zoh_sos", "butter2_analog", "critical2_analog", "SosFilter", "tf_freqresp", "is_stable"]
+__all__ = ["zoh_sos", "ZohAt", "butter2_analog", "critical2_analog", "SosFilter", "tf_freqresp", "is_stable"]
 
 
 def _as_coeffs(name: str, c: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -150,6 +150,98 @@ def zoh_sos(num: Sequence[float], den: Sequence[float], dt_s: float, *,
         i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
         sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
     return sos
+
+
+class ZohAt:
+    """Exact zero-order-hold discretisations of one ``num(s)/den(s)`` with the output read inside the interval.
+
+    For an input held over each sample interval ``[t_k, t_k + dt_s)`` the state-space solution
+    gives the output a fraction ``a`` of the period into the interval exactly:
+    ``y(t_k + a dt_s) = C e^{A a dt_s} x_k + (C Gamma(a) + D) u_k`` with
+    ``Gamma(a) = int_0^{a dt_s} e^{A s} ds B``. :meth:`parts` returns it as a strictly proper
+    discrete system of ``u`` (second-order sections, the ``x_k`` part, built like
+    :func:`zoh_sos` ``output="start"``) plus a direct gain (the ``u_k`` part): no interpolation
+    between interval starts. The realisation and the period's exponential are built once per
+    model; each fraction costs one small matrix exponential and the discrete zeros.
+
+    Parameters
+    ----------
+    num, den : array_like
+        Coefficients in descending powers of s (s in rad/s).
+    dt_s : float
+        Sample period, s.
+    """
+
+    def __init__(self, num: Sequence[float], den: Sequence[float], dt_s: float) -> None:
+        dt_s = positive("dt_s", dt_s)
+        num_a, den_a = _as_coeffs("num", num), _as_coeffs("den", den)
+        if num_a.size > den_a.size:
+            raise BadInputError("the transfer function must be proper (deg num <= deg den)")
+        z, p, k = signal.tf2zpk(num_a, den_a)
+        A, B, C, D = _series_ss(z, p, float(k))
+        n = A.shape[0]
+        M = np.zeros((n + 1, n + 1)); M[:n, :n] = A; M[:n, n:] = B
+        self._M, self._C, self._D, self._n = M * dt_s, C, float(D[0, 0]), n
+        if n:
+            E = linalg.expm(self._M)
+            self._Ad, self._Bd = E[:n, :n], E[:n, n:]
+            self._pd = _clean_roots(linalg.eigvals(self._Ad))
+
+    def rows(self, a: float) -> tuple[np.ndarray, float]:
+        """``(c, d)``: ``y(t_k + a dt_s) = c . x_k + d u_k`` for ``0 <= a <= 1`` (``x_k`` from :meth:`states`)."""
+        n = self._n
+        if n == 0:
+            return np.zeros(0), self._D
+        Ea = linalg.expm(self._M * float(a))
+        return (self._C @ Ea[:n, :n])[0], float((self._C @ Ea[:n, n:])[0, 0]) + self._D
+
+    def states(self, u: np.ndarray) -> np.ndarray:
+        """The realisation's states ``x_k`` at the interval starts, shape ``(len(u), n)``, at rest with ``u[0]`` before.
+
+        Each state is filtered from ``u`` by its own sections (the discrete zeros of the state's
+        row, as in :meth:`parts`), so that any output fraction is ``x_k . c + d u_k``
+        (:meth:`rows`) at the cost of one small matrix exponential.
+        """
+        u = np.asarray(u, float)
+        n = self._n
+        X = np.empty((u.size, n))
+        for i in range(n):
+            e = np.zeros((1, n)); e[0, i] = 1.0
+            sos = self._strict_sos(e)
+            with np.errstate(all="ignore"):
+                X[:, i] = signal.sosfilt(sos, u, zi=signal.sosfilt_zi(sos) * u[0])[0]
+        return X
+
+    def _strict_sos(self, Ca: np.ndarray) -> np.ndarray:
+        """Sections of the strictly proper discrete system ``(Ad, Bd, Ca, 0)``."""
+        n = self._n
+        Ad, Bd, pd = self._Ad, self._Bd, self._pd
+        zd = _clean_roots(_ss_zeros(Ad, Bd, Ca, np.zeros((1, 1))))
+        near_one = np.concatenate([zd, pd])
+        z0 = 1.0 if near_one.size == 0 or np.min(np.abs(1.0 - near_one)) > 1e-9 else 1.7 + 0.3j
+        g0 = (Ca @ np.linalg.solve(z0 * np.eye(n) - Ad, Bd))[0, 0]
+        kd = float(np.real(g0 * np.prod(z0 - pd) / np.prod(z0 - zd)))
+        sos = signal.zpk2sos(zd, pd, kd)
+        for _ in range(pd.size - zd.size):   # relative degree as delay, as in zoh_sos
+            i = next(i for i in range(sos.shape[0]) if sos[i, 2] == 0.0 and sos[i, 0] != 0.0)
+            sos[i, :3] = [0.0, sos[i, 0], sos[i, 1]]
+        return sos
+
+    def parts(self, a: float) -> tuple[np.ndarray | None, float]:
+        """``(sos, d)``: ``y(t_k + a dt_s) = sosfilt(sos, u)[k] + d u[k]`` for ``0 <= a <= 1`` (working samples).
+
+        ``sos`` (for :func:`scipy.signal.sosfilt`, output unit per input unit) is ``None`` for a
+        static gain; ``d`` is the direct gain ``C Gamma(a) + D``. At ``a = 0`` this is the
+        interval-start discretisation; at ``a = 1`` the output after the whole hold.
+        """
+        a = float(a)
+        if not 0.0 <= a <= 1.0:
+            raise BadInputError(f"the fraction of the interval must be within [0, 1], got {a}")
+        n = self._n
+        if n == 0:
+            return None, self._D
+        c, d = self.rows(a)
+        return self._strict_sos(c.reshape(1, -1)), d
 
 
 def critical2_analog(cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:
