@@ -182,6 +182,7 @@ class ZohAt:
         n = A.shape[0]
         M = np.zeros((n + 1, n + 1)); M[:n, :n] = A; M[:n, n:] = B
         self._M, self._C, self._D, self._n = M * dt_s, C, float(D[0, 0]), n
+        self._sizes = [len(g) for g in _pair(p)]   # the sections of _series_ss, in its order
         if n:
             E = linalg.expm(self._M)
             self._Ad, self._Bd = E[:n, :n], E[:n, n:]
@@ -195,22 +196,53 @@ class ZohAt:
         Ea = linalg.expm(self._M * float(a))
         return (self._C @ Ea[:n, :n])[0], float((self._C @ Ea[:n, n:])[0, 0]) + self._D
 
+    def rows_grid(self, a0: float, step: float, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`rows` at ``a0 + j step`` (``j = 0 .. count-1``, all within [0, 1]): ``(c`` shape ``(count, n)``, ``d``
+        shape ``(count,))``, by repeated products with one step's exponential (two matrix exponentials in all)."""
+        n = self._n
+        if n == 0:
+            return np.zeros((count, 0)), np.full(count, self._D)
+        r = np.concatenate([self._C[0], [0.0]]) @ linalg.expm(self._M * float(a0))
+        Es = linalg.expm(self._M * float(step))
+        out = np.empty((count, n + 1))
+        for j in range(count):
+            out[j] = r
+            r = r @ Es
+        return out[:, :n], out[:, n] + self._D
+
     def states(self, u: np.ndarray) -> np.ndarray:
         """The realisation's states ``x_k`` at the interval starts, shape ``(len(u), n)``, at rest with ``u[0]`` before.
 
-        Each state is filtered from ``u`` by its own sections (the discrete zeros of the state's
-        row, as in :meth:`parts`), so that any output fraction is ``x_k . c + d u_k``
-        (:meth:`rows`) at the cost of one small matrix exponential.
+        The realisation is a series of first- and second-order sections, so its discrete state
+        matrix is block lower triangular: each section's states are filtered (second order at
+        most, :func:`scipy.signal.lfilter`) from ``u`` and the states of the sections before it.
+        Any output fraction is then ``x_k . c + d u_k`` (:meth:`rows`) at the cost of one small
+        matrix exponential.
         """
         u = np.asarray(u, float)
         n = self._n
-        X = np.empty((u.size, n))
-        for i in range(n):
-            e = np.zeros((1, n)); e[0, i] = 1.0
-            sos = self._strict_sos(e)
-            with np.errstate(all="ignore"):
-                X[:, i] = signal.sosfilt(sos, u, zi=signal.sosfilt_zi(sos) * u[0])[0]
-        return X
+        X = np.zeros((u.size, n))
+        if n == 0 or u.size == 0:
+            return X
+        Ad, Bd = self._Ad, self._Bd[:, 0]
+        du = u - u[0]   # deviations from the rest at u[0], from a zero state
+        i0 = 0
+        for size in self._sizes:
+            sl = slice(i0, i0 + size)
+            g = np.outer(du, Bd[sl])
+            if i0:
+                g += X[:, :i0] @ Ad[sl, :i0].T
+            F = Ad[sl, sl]
+            if size == 1:   # x[k+1] = f x[k] + g[k]
+                X[:, i0] = signal.lfilter([0.0, 1.0], [1.0, -F[0, 0]], g[:, 0])
+            else:           # x[k+1] = F x[k] + g[k]: adj(zI - F) / det(zI - F)
+                a = [1.0, -(F[0, 0] + F[1, 1]), F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]]
+                X[:, i0] = (signal.lfilter([0.0, 1.0, -F[1, 1]], a, g[:, 0])
+                            + signal.lfilter([0.0, 0.0, F[0, 1]], a, g[:, 1]))
+                X[:, i0 + 1] = (signal.lfilter([0.0, 0.0, F[1, 0]], a, g[:, 0])
+                                + signal.lfilter([0.0, 1.0, -F[0, 0]], a, g[:, 1]))
+            i0 += size
+        return X + np.linalg.solve(np.eye(n) - Ad, Bd) * u[0]
 
     def _strict_sos(self, Ca: np.ndarray) -> np.ndarray:
         """Sections of the strictly proper discrete system ``(Ad, Bd, Ca, 0)``."""
