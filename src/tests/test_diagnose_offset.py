@@ -105,3 +105,37 @@ def test_timing_stage_on_a_centred_log():
     assert prep.decimation == 1
     timing_stage(prep, np.asarray(num, float), np.asarray(den, float), 0.0, lambda *_: None)
     assert abs(float(prep.sample_offset) - 0.5) < 3e-3
+
+
+def test_a_model_identified_from_the_log_is_simulated_as_it_was_fitted():
+    """``exact=False`` (a model identified by hasel.ident's interpolating simulation) interpolates linearly
+    between interval starts, bit for bit the old path; the exact read differs from it by micrometres."""
+    num, den = paper.plant_tf()
+    u = _input(600, 3)
+    plain = LinearSim(num, den, RATE, 0.4, exact=False)
+    ys = plain.run_start(u)
+    assert type(ys) is np.ndarray                  # no model memory: at_offset / estimate_timing interpolate
+    lin = ys[:-1] + 0.4 * (ys[1:] - ys[:-1])
+    np.testing.assert_array_equal(plain.run(u), lin)
+    exact = LinearSim(num, den, RATE, 0.4).run(u)
+    gap = float(np.max(np.abs(exact - lin)))
+    assert 1e-4 < gap < 1e-2                       # mm: the interpolation error at 100 Hz, not a different model
+    np.testing.assert_allclose(exact, _exact_at(num, den, u, 0.4), atol=1e-8)
+
+
+def test_the_model_stage_turns_the_exact_read_off_only_for_an_identified_model():
+    """Given a model the prepared log keeps ``exact_offset``; identifying one from the log turns it off."""
+    from hasel.diagnose.core import DiagnoseOptions, _model_stage
+    rng = np.random.default_rng(5)
+    n = 4000
+    t = np.arange(n) / 200.0
+    u = 4.0 + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t)) + 0.5 * np.sin(2 * np.pi * 5.0 * t)
+    num, den = paper.plant_tf()
+    y = LinearSim(num, den, 200.0, 0.0).run(u) + 0.002 * rng.standard_normal(n)
+    opts = DiagnoseOptions(identify="internal")
+    given = prepare(t, u, y)
+    _model_stage(given, np.asarray(num, float), np.asarray(den, float), {"source": "given"}, opts, lambda m: None)
+    assert given.exact_offset
+    ident = prepare(t, u, y)
+    _, _, src, _, _ = _model_stage(ident, None, None, {}, opts, lambda m: None)
+    assert src["source"] == "identified from the log" and not ident.exact_offset

@@ -439,7 +439,7 @@ def _linear_outputs(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: f
     """A linear model's simulated output of every record (output units), its input delayed ``delay_s`` s."""
     from hasel.diagnose.prep import LinearSim
 
-    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset)
+    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset, exact=prep.exact_offset)
     return [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
             for r in prep.records]
 
@@ -548,7 +548,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
     mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi) if nuisance_load else (0.0, 1.0)
-    ys = kappa * LinearSim(num, loaded_den(den, mu), prep.rate_hz, 0.0).run_start(u)
+    ys = kappa * LinearSim(num, loaded_den(den, mu), prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
     at_bound = min(a - lo, hi - a) < 0.02 / q
@@ -587,7 +587,7 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
 
     def cost(mu: float) -> tuple[float, float]:
         try:
-            ys = LinearSim(num, loaded_den(den, float(mu)), prep.rate_hz, 0.0).run_start(u)
+            ys = LinearSim(num, loaded_den(den, float(mu)), prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u)
         except (BadInputError, ValueError, np.linalg.LinAlgError):
             return float("inf"), 1.0
         a, _ = estimate_timing(ys, y, use, lo, hi)
@@ -609,7 +609,7 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
                                    options={"xatol": 0.005})
     mu = float(res.x) if res.fun < costs[i] else float(grid[i])
     sse, kappa = cost(mu)
-    sse0 = estimate_timing(LinearSim(num, den, prep.rate_hz, 0.0).run_start(u), y, use, lo, hi)[1]
+    sse0 = estimate_timing(LinearSim(num, den, prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u), y, use, lo, hi)[1]
     n = int(use.sum())
     # kept only when the two parameters pay for themselves (BIC, noise variance unknown): on an
     # effect-free log the shift is then the nominal model's, as before. Not only when the gap is
@@ -995,6 +995,8 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
     clips = flat_extremes(prep.records[0].y)
     given = num is not None
     if not given:
+        # simulated the way the identification fitted it (linear interpolation between interval starts)
+        prep.exact_offset = False
         prep_id = prep
         if clips:
             # clipped samples only bound the output: identify the linear model without them

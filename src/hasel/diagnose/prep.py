@@ -92,6 +92,11 @@ class Prepared:
         Where in its working interval each output sample is taken, working samples (see
         :class:`LinearSim`): ``(q - 1) / 2q`` for block means of ``q`` samples of a
         zero-order-hold log; the diagnosis refines it as a nuisance (a timing offset).
+    exact_offset : bool
+        Whether simulations read the output between interval starts exactly for the held
+        input (:class:`LinearSim` ``exact``), or interpolate linearly between them. False when the
+        nominal model is identified from the log: the identification's simulation
+        (:mod:`hasel.ident.timefit`) interpolates, and a model is simulated the way it was fitted.
     """
 
     records: list[Record]
@@ -101,6 +106,7 @@ class Prepared:
     split: str
     info: dict = field(default_factory=dict)
     sample_offset: float = 0.0
+    exact_offset: bool = True
 
     @property
     def dt_s(self) -> float:
@@ -379,9 +385,14 @@ class LinearSim:
         Working rate, Hz.
     offset : float
         Where in the interval the output is taken, in working samples (-1 to 1).
+    exact : bool
+        Read the output at ``offset`` exactly (:class:`hasel.lti.ZohAt`); False: interpolate
+        linearly between interval starts (the simulation of :mod:`hasel.ident.timefit`, for a
+        model identified with it), and :meth:`run_start` returns a plain array.
     """
 
-    def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float, offset: float = 0.0) -> None:
+    def __init__(self, num: np.ndarray, den: np.ndarray, rate_hz: float, offset: float = 0.0,
+                 exact: bool = True) -> None:
         num = np.atleast_1d(np.asarray(num, float))
         den = np.atleast_1d(np.asarray(den, float))
         if num.size > den.size:
@@ -398,7 +409,8 @@ class LinearSim:
         self._model = (num, den, float(rate_hz))
         self._sos = self._zi = None
         self._frac = None
-        if self.offset != 0.0:
+        self.exact = bool(exact)
+        if self.exact and self.offset != 0.0:
             self._frac = self._build_frac(self.offset)
         if self._frac is None:
             self._build_zoh()   # (otherwise it is built only if run_start is called)
@@ -482,6 +494,8 @@ class LinearSim:
         x = np.concatenate([u, u[-1:]])
         sos = self.sos
         ys, _ = signal.sosfilt(sos, x, zi=self._zi * u[0])
+        if not self.exact:
+            return ys
         out = ys.view(StartOutputs)
         out._src = (self, u, {})
         return out
