@@ -97,6 +97,9 @@ class Prepared:
         input (:class:`LinearSim` ``exact``), or interpolate linearly between them. False when the
         nominal model is identified from the log: the identification's simulation
         (:mod:`hasel.ident.timefit`) interpolates, and a model is simulated the way it was fitted.
+        False for block means (``decimation`` > 1) too: the read is exact for a sample of the
+        output, not for a mean of ``q`` of them (with it, ``make demo``'s 10 kHz log, whose truth has
+        no load, was given a load of mass ratio +0.064 to make up the difference).
     """
 
     records: list[Record]
@@ -323,7 +326,7 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     # original samples into the interval over which the block's mean input is held
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
                     info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
-                    sample_offset=(q - 1) / (2.0 * q))
+                    sample_offset=(q - 1) / (2.0 * q), exact_offset=q == 1)
 
 
 #: Exact fractional-offset discretisations already built: ``(sos, zi, d)`` by model, rate and offset.
