@@ -2,9 +2,10 @@
 # usage: bench/tune_diag/runsets.sh TREE OUTDIR [CORE] [SETS...]: the diagnosis tuning sets on TREE's code, pinned to one
 # core (taskset), niced, one process; OUTDIR/times.txt gets a line per set (wall seconds). PY overrides the python.
 # Compare two trees by running both side by side, one core each, then: python bench/tune_diag/tally.py OUT_A OUT_B
-# SETS default: all. Names: cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 datasets
+# SETS default: all. Names: cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2
+# deadzones drifts modes datasets
 TREE=$1; OUT=$2; CORE=${3:-1}; shift $(( $# < 3 ? $# : 3 ))
-SETS=${@:-cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 datasets}
+SETS=${@:-cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes datasets}
 PY=${PY:-$(cd "$(dirname "$0")/../.." && pwd)/.venv/bin/python}
 export PYTHONPATH=$TREE/src:$TREE/bench OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
 mkdir -p $OUT
@@ -21,6 +22,9 @@ for s in $SETS; do
     free_indep11) a="$TREE/bench/tune_diag/free_indep.py --seed 11";;
     free_indep13) a="$TREE/bench/tune_diag/free_indep.py --seed 13";;
     multi2) a="$TREE/bench/tune_diag/multi2.py --seed 21";;
+    deadzones) a="$TREE/bench/tune_diag/deadzones.py --seed 1";;
+    drifts) a="$TREE/bench/tune_diag/drifts.py --seed 1";;
+    modes) a="$TREE/bench/tune_diag/modes.py --seed 1";;
     datasets) (cd $TREE && nice -n 5 taskset -c $CORE $PY bench/tune_diag/datasets.py > $OUT/datasets.log 2>&1); echo "datasets rc=$? $(( $(date +%s) - t0 )) s" >> $OUT/times.txt; continue;;
   esac
   mkdir -p $OUT/$s

@@ -2,7 +2,7 @@
 usage: python bench/tune_diag/tally.py OUTDIR [OUTDIR2 ...] (outputs of runsets.sh)  (prints a side-by-side table when two are given)"""
 import json, os, sys
 
-SETS = "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2".split()
+SETS = "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes".split()
 
 def as_set(x):
     """Effect names of a truth or verdict field (list, comma string, dict or 'none') as a set."""
