@@ -97,9 +97,10 @@ class Prepared:
         input (:class:`LinearSim` ``exact``), or interpolate linearly between them. False when the
         nominal model is identified from the log: the identification's simulation
         (:mod:`hasel.ident.timefit`) interpolates, and a model is simulated the way it was fitted.
-        False for block means (``decimation`` > 1) too: the read is exact for a sample of the
-        output, not for a mean of ``q`` of them (with it, ``make demo``'s 10 kHz log, whose truth has
-        no load, was given a load of mass ratio +0.064 to make up the difference).
+        False for block means (``decimation`` > 1) too: with the exact read there, ``make demo``'s log
+        (whose truth has no load) was given a load of mass ratio +0.064, because its model, made by
+        ``hasel identify``, carries the interpolating convention (with the paper's P(s) as the model the
+        exact read named the true effects only: ``bench/tune_diag/RESULT-l-offset.md``).
     """
 
     records: list[Record]
