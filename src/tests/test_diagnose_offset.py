@@ -139,3 +139,40 @@ def test_the_model_stage_turns_the_exact_read_off_only_for_an_identified_model()
     ident = prepare(t, u, y)
     _, _, src, _, _ = _model_stage(ident, None, None, {}, opts, lambda m: None)
     assert src["source"] == "identified from the log" and not ident.exact_offset
+
+
+def test_a_model_fitted_with_the_interpolating_read_keeps_it_and_block_means_are_read_exactly():
+    """A given model whose JSON says ``sample_read: interpolated`` (hasel identify's) is simulated that way; the
+    exact P(s) on a log reduced by block means (decimation > 1) is read exactly."""
+    from hasel.diagnose.core import DiagnoseOptions, _model_stage, _nominal_model
+    rng = np.random.default_rng(7)
+    fs = 2000.0
+    n = 16000
+    t = np.arange(n) / fs
+    u = 4.0 + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t)) + 0.5 * np.sin(2 * np.pi * 5.0 * t)
+    num, den = paper.plant_tf()
+    y = LinearSim(num, den, fs, 0.0).run(u) + 0.002 * rng.standard_normal(n)
+    opts = DiagnoseOptions()
+    exact = prepare(t, u, y, target_rate_hz=500.0)
+    assert exact.decimation > 1
+    n0, d0, src = _nominal_model({"num": list(num), "den": list(den)})
+    _model_stage(exact, n0, d0, src, opts, lambda m: None)
+    assert exact.exact_offset and "sample_read" not in src
+    fitted = prepare(t, u, y, target_rate_hz=500.0)
+    n1, d1, src1 = _nominal_model({"num": list(num), "den": list(den), "sample_read": "interpolated"})
+    assert src1["sample_read"] == "interpolated"
+    _model_stage(fitted, n1, d1, src1, opts, lambda m: None)
+    assert not fitted.exact_offset
+
+
+def test_hasel_identify_says_how_its_fit_read_the_samples():
+    """The model JSON of hasel.ident states the interpolating read (so diagnose simulates it the same way)."""
+    from hasel.ident import identify as ident_identify
+    rng = np.random.default_rng(3)
+    fs = 200.0
+    t = np.arange(int(60 * fs)) / fs
+    u = 4.0 + np.sin(2 * np.pi * (0.1 + 0.2 * t) * t) + 1.0 * (t > 30)
+    num, den = paper.plant_tf()
+    y = LinearSim(num, den, fs, 0.0).run(u) + 0.002 * rng.standard_normal(t.size)
+    mj = ident_identify(t, u, y).to_model_json()
+    assert mj["sample_read"] == "interpolated"

@@ -484,7 +484,7 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
                 raise ValueError("unstable model")
             d = _model_delay(mj)
             cands.append((_train_fit(prep, num, den, d), num, den,
-                          {"source": "hasel.ident", "delay_s": d,
+                          {"source": "hasel.ident", "delay_s": d, "sample_read": "interpolated",
                            "details": {"order": int(den.size - 1),
                                        **{k: mj[k] for k in ("fit", "frequency_band_hz", "static_gain") if k in mj}}}))
         except Exception as err:  # noqa: BLE001 - any failure falls back to the internal fit
@@ -499,7 +499,8 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
             num, den, info = fit_linear(prep, max_order=opts.max_order)
         if note:
             info["note"] = note
-        cands.append((_train_fit(prep, num, den), num, den, {"source": "identified from the log", "details": info}))
+        cands.append((_train_fit(prep, num, den), num, den, {"source": "identified from the log", "details": info,
+                                                             "sample_read": "interpolated"}))
     fit, num, den, src = min(cands, key=lambda c: c[0])
     src["training_nrmse_with_offset"] = fit
     if note and src["source"] == "identified from the log":
@@ -985,7 +986,12 @@ def _nominal_model(model) -> tuple[np.ndarray | None, np.ndarray | None, dict]:
     if model is None:
         return None, None, {}
     num, den = _as_model(model)
-    return num, den, {"source": "given", "delay_s": _model_delay(model)}
+    src = {"source": "given", "delay_s": _model_delay(model)}
+    if isinstance(model, dict) and model.get("sample_read") == "interpolated":
+        # fitted by a simulation that interpolates between interval starts (hasel identify's, or this
+        # diagnosis's own identification): simulated the same way
+        src["sample_read"] = "interpolated"
+    return num, den, src
 
 
 def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, say
@@ -994,7 +1000,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
     offset (set in ``prep``) and the measured clips. Returns ``num, den, source, timing, clips``."""
     clips = flat_extremes(prep.records[0].y)
     given = num is not None
-    if not given:
+    if not given or source.get("sample_read") == "interpolated":
         # simulated the way the identification fitted it (linear interpolation between interval starts)
         prep.exact_offset = False
         prep_id = prep

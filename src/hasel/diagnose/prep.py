@@ -97,9 +97,9 @@ class Prepared:
         input (:class:`LinearSim` ``exact``), or interpolate linearly between them. False when the
         nominal model is identified from the log: the identification's simulation
         (:mod:`hasel.ident.timefit`) interpolates, and a model is simulated the way it was fitted.
-        False for block means (``decimation`` > 1) too: with the exact read there, ``make demo``'s log
-        (whose truth has no load) was given a load of mass ratio +0.064, because its model, made by
-        ``hasel identify``, carries the interpolating convention (with the paper's P(s) as the model the
+        False too for a given model whose JSON says ``"sample_read": "interpolated"`` (written by
+        ``hasel identify`` and by this diagnosis's own identification): read exactly, ``make demo``'s
+        identify-made model was given a spurious load of mass ratio +0.064 (with the paper's P(s) the
         exact read named the true effects only: ``bench/tune_diag/RESULT-l-offset.md``).
     """
 
@@ -327,7 +327,7 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     # original samples into the interval over which the block's mean input is held
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
                     info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
-                    sample_offset=(q - 1) / (2.0 * q), exact_offset=q == 1)
+                    sample_offset=(q - 1) / (2.0 * q))
 
 
 #: Exact fractional-offset discretisations already built: ``(sos, zi, d)`` by model, rate and offset.

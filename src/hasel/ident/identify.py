@@ -384,6 +384,9 @@ class IdentResult:
             "den": [float(c) for c in m.den],
             "delay_s": float(m.delay_s),
             "timing_offset_s": float(self.timing_offset_s),
+            # the fit's simulation read the output between interval starts by linear interpolation
+            # (hasel.ident.timefit): a simulator reading it exactly would see a small linear mismatch
+            "sample_read": SAMPLE_READ,
             "zeros": pairs(m.zeros),
             "poles": pairs(m.poles),
             "gain": float(m.gain),
@@ -676,6 +679,10 @@ def _steady_means(u: np.ndarray, y: np.ndarray, rate: float) -> tuple[np.ndarray
 
 #: Relative margin within which two held-out errors tie (order selection, timing offset).
 _TIE = 0.02
+#: How the fits' simulation reads the output between interval starts (the model JSON's ``sample_read``):
+#: linear interpolation (:func:`hasel.ident.timefit.simulate_zoh`); ``hasel diagnose`` simulates such a
+#: model the same way.
+SAMPLE_READ = "interpolated"
 
 
 def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
