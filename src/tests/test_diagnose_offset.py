@@ -161,8 +161,12 @@ def test_a_model_fitted_with_the_interpolating_read_keeps_it_and_block_means_are
     fitted = prepare(t, u, y, target_rate_hz=500.0)
     n1, d1, src1 = _nominal_model({"num": list(num), "den": list(den), "sample_read": "interpolated"})
     assert src1["sample_read"] == "interpolated"
-    _model_stage(fitted, n1, d1, src1, opts, lambda m: None)
+    n2, d2, src2, _, _ = _model_stage(fitted, n1, d1, src1, opts, lambda m: None)
     assert not fitted.exact_offset
+    # the given model is kept (not identified again), with its source
+    np.testing.assert_array_equal(n2, n1)
+    np.testing.assert_array_equal(d2, d1)
+    assert src2["source"] == "given" and "nominal_scale" in src2
 
 
 def test_hasel_identify_says_how_its_fit_read_the_samples():

@@ -1003,6 +1003,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
     if not given or source.get("sample_read") == "interpolated":
         # simulated the way the identification fitted it (linear interpolation between interval starts)
         prep.exact_offset = False
+    if not given:
         prep_id = prep
         if clips:
             # clipped samples only bound the output: identify the linear model without them
