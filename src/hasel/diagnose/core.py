@@ -63,6 +63,7 @@ from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.load import LOAD_SAG_MIN_MU, load_offset, loaded_den
 from hasel.effects.registry import family
 from hasel.errors import BadInputError, HaselError
+from hasel.ident.identify import SAMPLE_READ
 
 __all__ = ["DiagnoseOptions", "Verdict", "DiagnosisFailed", "diagnose", "block_test", "coloured_z"]
 
@@ -484,7 +485,7 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
                 raise ValueError("unstable model")
             d = _model_delay(mj)
             cands.append((_train_fit(prep, num, den, d), num, den,
-                          {"source": "hasel.ident", "delay_s": d, "sample_read": "interpolated",
+                          {"source": "hasel.ident", "delay_s": d, "sample_read": SAMPLE_READ,
                            "details": {"order": int(den.size - 1),
                                        **{k: mj[k] for k in ("fit", "frequency_band_hz", "static_gain") if k in mj}}}))
         except Exception as err:  # noqa: BLE001 - any failure falls back to the internal fit
@@ -500,7 +501,7 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
         if note:
             info["note"] = note
         cands.append((_train_fit(prep, num, den), num, den, {"source": "identified from the log", "details": info,
-                                                             "sample_read": "interpolated"}))
+                                                             "sample_read": SAMPLE_READ}))
     fit, num, den, src = min(cands, key=lambda c: c[0])
     src["training_nrmse_with_offset"] = fit
     if note and src["source"] == "identified from the log":
@@ -987,10 +988,10 @@ def _nominal_model(model) -> tuple[np.ndarray | None, np.ndarray | None, dict]:
         return None, None, {}
     num, den = _as_model(model)
     src = {"source": "given", "delay_s": _model_delay(model)}
-    if isinstance(model, dict) and model.get("sample_read") == "interpolated":
+    if isinstance(model, dict) and model.get("sample_read") == SAMPLE_READ:
         # fitted by a simulation that interpolates between interval starts (hasel identify's, or this
         # diagnosis's own identification): simulated the same way
-        src["sample_read"] = "interpolated"
+        src["sample_read"] = SAMPLE_READ
     return num, den, src
 
 
@@ -1000,7 +1001,7 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
     offset (set in ``prep``) and the measured clips. Returns ``num, den, source, timing, clips``."""
     clips = flat_extremes(prep.records[0].y)
     given = num is not None
-    if not given or source.get("sample_read") == "interpolated":
+    if not given or source.get("sample_read") == SAMPLE_READ:
         # simulated the way the identification fitted it (linear interpolation between interval starts)
         prep.exact_offset = False
     if not given:
