@@ -122,8 +122,7 @@ class Pipeline:
     def __post_init__(self) -> None:
         self.num = np.asarray(self.num, float)
         self.den = np.asarray(self.den, float)
-        self.nominal = LinearSim(self.num, self.den, self.prep.rate_hz, self.prep.sample_offset,
-                                 exact=self.prep.exact_offset)
+        self.nominal = self.prep.sim(self.num, self.den)
         self.inputs = [(_shift(r.t_s, r.u, self.delay_s) if self.delay_s > 0 else r.u) for r in self.prep.records]
         self.t_dom = max(min(dominant_time_constant_s(self.den), self.span_s), 2.0 * self.prep.dt_s)
         # maps are normalised on the training samples: [-1, 1] spans their 0.5-99.5 percentiles,
@@ -165,11 +164,9 @@ class Pipeline:
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
             if mu == 0.0 and damping is None:
-                sim = self.nominal if lin is None else LinearSim(num, den, self.prep.rate_hz, self.prep.sample_offset,
-                                                                 exact=self.prep.exact_offset)
+                sim = self.nominal if lin is None else self.prep.sim(num, den)
             else:
-                sim = LinearSim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping), self.prep.rate_hz,
-                                self.prep.sample_offset, exact=self.prep.exact_offset)
+                sim = self.prep.sim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping))
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim

@@ -438,9 +438,7 @@ def _as_model(model) -> tuple[np.ndarray, np.ndarray]:
 
 def _linear_outputs(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float = 0.0) -> list[np.ndarray]:
     """A linear model's simulated output of every record (output units), its input delayed ``delay_s`` s."""
-    from hasel.diagnose.prep import LinearSim
-
-    sim = LinearSim(num, den, prep.rate_hz, prep.sample_offset, exact=prep.exact_offset)
+    sim = prep.sim(num, den)
     return [sim.run(np.interp(r.t_s - delay_s, r.t_s, r.u, left=r.u[0]) if delay_s > 0 else r.u)
             for r in prep.records]
 
@@ -541,7 +539,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     Returns the ``timing_offset`` entry of the verdict (output lag behind the zero-order
     hold convention, in seconds and original samples; positive: the output lags).
     """
-    from hasel.diagnose.prep import LinearSim, estimate_timing
+    from hasel.diagnose.prep import estimate_timing
 
     q = prep.decimation
     a0 = prep.sample_offset
@@ -550,7 +548,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
     mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi) if nuisance_load else (0.0, 1.0)
-    ys = kappa * LinearSim(num, loaded_den(den, mu), prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u)
+    ys = kappa * prep.sim(num, loaded_den(den, mu), 0.0).run_start(u)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
     at_bound = min(a - lo, hi - a) < 0.02 / q
@@ -583,13 +581,13 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
 
     Each trial is one linear simulation: a grid of ``mu`` then a bounded scalar search, ``kappa``
     by least squares at each shift's side."""
-    from hasel.diagnose.prep import LinearSim, at_offset, estimate_timing
+    from hasel.diagnose.prep import at_offset, estimate_timing
 
     y = prep.records[0].y
 
     def cost(mu: float) -> tuple[float, float]:
         try:
-            ys = LinearSim(num, loaded_den(den, float(mu)), prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u)
+            ys = prep.sim(num, loaded_den(den, float(mu)), 0.0).run_start(u)
         except (BadInputError, ValueError, np.linalg.LinAlgError):
             return float("inf"), 1.0
         a, _ = estimate_timing(ys, y, use, lo, hi)
@@ -611,7 +609,7 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
                                    options={"xatol": 0.005})
     mu = float(res.x) if res.fun < costs[i] else float(grid[i])
     sse, kappa = cost(mu)
-    sse0 = estimate_timing(LinearSim(num, den, prep.rate_hz, 0.0, exact=prep.exact_offset).run_start(u), y, use, lo, hi)[1]
+    sse0 = estimate_timing(prep.sim(num, den, 0.0).run_start(u), y, use, lo, hi)[1]
     n = int(use.sum())
     # kept only when the two parameters pay for themselves (BIC, noise variance unknown): on an
     # effect-free log the shift is then the nominal model's, as before. Not only when the gap is

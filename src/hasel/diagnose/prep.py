@@ -117,6 +117,14 @@ class Prepared:
         """Working sample period, s."""
         return 1.0 / self.rate_hz
 
+    def sim(self, num: np.ndarray, den: np.ndarray, offset: float | None = None) -> "LinearSim":
+        """The model ``num/den`` (descending powers of s) simulated at :attr:`rate_hz` with this
+        problem's read: output ``offset`` working samples into each held interval (default
+        :attr:`sample_offset`), read exactly or interpolated as :attr:`exact_offset` says.
+        One place, so no caller can pair a rate, an offset and a read convention that disagree."""
+        return LinearSim(num, den, self.rate_hz, self.sample_offset if offset is None else offset,
+                         exact=self.exact_offset)
+
     def stacked(self, what: str, mask: str | None = None) -> np.ndarray:
         """Concatenate ``what`` ("u", "y", "t_s") over the records, optionally masked ("train"/"valid"/"hold")."""
         parts = []
