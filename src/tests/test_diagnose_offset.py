@@ -48,9 +48,9 @@ def test_output_at_a_fractional_offset_is_exact_at_100hz(a):
     # also after scaling them (a fitted gain)
     ys = LinearSim(num, den, RATE, 0.0).run_start(u)
     np.testing.assert_array_equal(at_offset(ys, a), got)
-    assert float(np.max(np.abs(at_offset(1.7 * ys, a) - 1.7 * ref))) < 2e-8
+    assert float(np.max(np.abs(at_offset(ys.scaled(1.7), a) - 1.7 * ref))) < 2e-8
     # a plain array keeps the linear interpolation (the old definition), measurably off
-    lin = at_offset(np.asarray(ys), a)
+    lin = at_offset(ys.ys, a)
     assert float(np.sqrt(np.mean((lin - ref) ** 2))) > 1e-4
 
 
@@ -58,8 +58,8 @@ def test_zero_offset_is_the_interval_start_simulation_bit_for_bit():
     num, den = paper.plant_tf()
     u = _input(800, 2)
     ys = LinearSim(num, den, RATE, 0.0).run_start(u)
-    np.testing.assert_array_equal(LinearSim(num, den, RATE, 0.0).run(u), np.asarray(ys)[:-1])
-    np.testing.assert_array_equal(at_offset(ys, 0.0), np.asarray(ys)[:-1])
+    np.testing.assert_array_equal(LinearSim(num, den, RATE, 0.0).run(u), ys.ys[:-1])
+    np.testing.assert_array_equal(at_offset(ys, 0.0), ys.ys[:-1])
 
 
 def test_zohat_states_give_every_fraction():
@@ -90,7 +90,7 @@ def test_timing_offset_of_an_effect_free_log_is_estimated_exactly(true):
     a, sse = estimate_timing(ys, y, mask, -1.0, 1.0)
     assert abs(a - true) < 2e-3
     assert sse / mask.sum() < 1.2 * 0.005 ** 2          # down to the noise
-    a2, _ = estimate_timing(0.8 * ys, 0.8 * y, mask, -1.0, 1.0)   # a gain fitted beside it changes nothing
+    a2, _ = estimate_timing(ys.scaled(0.8), 0.8 * y, mask, -1.0, 1.0)   # a gain fitted beside it changes nothing
     assert abs(a2 - a) < 1e-6
 
 
@@ -113,8 +113,9 @@ def test_a_model_identified_from_the_log_is_simulated_as_it_was_fitted():
     num, den = paper.plant_tf()
     u = _input(600, 3)
     plain = LinearSim(num, den, RATE, 0.4, exact=False)
-    ys = plain.run_start(u)
-    assert type(ys) is np.ndarray                  # no model memory: at_offset / estimate_timing interpolate
+    run = plain.run_start(u)
+    assert run.sim is None                         # no model memory: at_offset / estimate_timing interpolate
+    ys = run.ys
     lin = ys[:-1] + 0.4 * (ys[1:] - ys[:-1])
     np.testing.assert_array_equal(plain.run(u), lin)
     exact = LinearSim(num, den, RATE, 0.4).run(u)

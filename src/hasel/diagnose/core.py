@@ -548,7 +548,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
     mu, kappa = _load_nuisance(prep, num, den, u, use, lo, hi) if nuisance_load else (0.0, 1.0)
-    ys = kappa * prep.sim(num, loaded_den(den, mu), 0.0).run_start(u)
+    ys = prep.sim(num, loaded_den(den, mu), 0.0).run_start(u).scaled(kappa)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
     at_bound = min(a - lo, hi - a) < 0.02 / q
@@ -596,7 +596,7 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
         k = float(mc @ yc / max(mc @ mc, 1e-300))
         if not 0.2 <= k <= 5.0:
             return float("inf"), 1.0
-        _, sse = estimate_timing(k * ys, y, use, lo, hi)
+        _, sse = estimate_timing(ys.scaled(k), y, use, lo, hi)
         return sse, k
 
     grid = np.array([-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.5, 0.8, 1.2, 2.0])

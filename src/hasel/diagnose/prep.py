@@ -42,7 +42,7 @@ from hasel.lti import ZohAt, zoh_sos
 from hasel.metrics import nrmse
 from hasel.signals import uniform_grid
 
-__all__ = ["Record", "Prepared", "LinearSim", "StartOutputs", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
+__all__ = ["Record", "Prepared", "LinearSim", "StartRun", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
            "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
 
 
@@ -342,38 +342,36 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
 _FRAC_CACHE: dict = {}
 
 
-class StartOutputs(np.ndarray):
-    """Interval-start outputs (:meth:`LinearSim.run_start`) that remember their model and input.
+@dataclass(frozen=True)
+class StartRun:
+    """Interval-start outputs of one simulation (:meth:`LinearSim.run_start`), with the model and input
+    that made them, so that the output between interval starts can be read exactly.
 
-    A plain array to every caller (any arithmetic gives plain arrays), except that a product
-    with a scalar keeps the memory (and the scale): :func:`at_offset` and
-    :func:`estimate_timing` then read the output between interval starts exactly from the
-    model (:class:`hasel.lti.ZohAt`) instead of interpolating linearly.
+    Attributes
+    ----------
+    ys : ndarray
+        The ``n + 1`` interval-start outputs (the last one after ``u[-1]``'s interval), times
+        ``scale``; output units.
+    sim : LinearSim or None
+        The simulation, when it reads exactly (:class:`hasel.lti.ZohAt`); ``None``: outputs between
+        interval starts are interpolated linearly (a model fitted that way).
+    u : ndarray or None
+        The held input (input units), with ``sim``.
+    scale : float
+        The factor the model's outputs were multiplied by (a fitted gain).
+    cache : dict
+        The model's states for ``u`` and Gram matrices (:func:`estimate_timing`), shared by scaled copies.
     """
 
-    _src = None     # (LinearSim, input u, cache dict) or None
-    _scale = 1.0
+    ys: np.ndarray
+    sim: "LinearSim | None" = None
+    u: "np.ndarray | None" = None
+    scale: float = 1.0
+    cache: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def __array_finalize__(self, obj) -> None:
-        self._src, self._scale = None, 1.0   # slices and views do not keep the model
-
-    def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
-        plain = tuple(np.asarray(x) if isinstance(x, StartOutputs) else x for x in inputs)
-        if "out" in kwargs:
-            kwargs["out"] = tuple(np.asarray(x) if isinstance(x, StartOutputs) else x for x in kwargs["out"])
-        res = getattr(ufunc, method)(*plain, **kwargs)
-        if ufunc is np.multiply and method == "__call__" and len(inputs) == 2 and "out" not in kwargs:
-            me = [x for x in inputs if isinstance(x, StartOutputs)]
-            other = [x for x in inputs if not isinstance(x, StartOutputs)]
-            if len(me) == 1 and len(other) == 1 and me[0]._src is not None and np.ndim(other[0]) == 0:
-                k = float(other[0])
-                if math.isfinite(k):
-                    res = res.view(StartOutputs)
-                    res._src, res._scale = me[0]._src, me[0]._scale * k
-        return res
-
-    def __reduce__(self):
-        return np.asarray(self).__reduce__()
+    def scaled(self, k: float) -> "StartRun":
+        """The same run times the scalar ``k`` (states and Gram matrices shared)."""
+        return StartRun(float(k) * self.ys, self.sim, self.u, self.scale * float(k), self.cache)
 
 
 class LinearSim:
@@ -500,17 +498,14 @@ class LinearSim:
             self._build_zoh()
         return self._sos
 
-    def run_start(self, u: np.ndarray) -> np.ndarray:
-        """Output at the interval starts, ``n + 1`` samples (the last one after ``u[-1]``'s interval)."""
+    def run_start(self, u: np.ndarray) -> StartRun:
+        """Output at the interval starts for input ``u``, ``n + 1`` samples (the last one after
+        ``u[-1]``'s interval), with this simulation when it reads exactly (:class:`StartRun`)."""
         u = np.asarray(u, float)
         x = np.concatenate([u, u[-1:]])
         sos = self.sos
         ys, _ = signal.sosfilt(sos, x, zi=self._zi * u[0])
-        if not self.exact:
-            return ys
-        out = ys.view(StartOutputs)
-        out._src = (self, u, {})
-        return out
+        return StartRun(ys, self, u) if self.exact else StartRun(ys)
 
     def run(self, u: np.ndarray) -> np.ndarray:
         """Output at the working samples for input ``u`` (at rest with ``u[0]`` before), mm for kV.
@@ -524,29 +519,30 @@ class LinearSim:
         return np.asarray(at_offset(self.run_start(u), self.offset))
 
 
-def at_offset(ys: np.ndarray, offset: float) -> np.ndarray:
+def at_offset(ys: "StartRun | np.ndarray", offset: float) -> np.ndarray:
     """Samples ``k + offset`` (``-1 <= offset <= 1``) of ``n + 1`` interval-start outputs ``ys``, ``n`` values.
 
-    For outputs of :meth:`LinearSim.run_start` (a :class:`StartOutputs`, possibly times a
-    scalar) and ``offset != 0``: the model's exact output at that point for the input held
-    over each interval (:class:`hasel.lti.ZohAt`; the same numbers as
-    ``LinearSim(..., offset).run``, to rounding once :func:`estimate_timing` has filtered the
-    states of these outputs, bit for bit before). For a plain array: linear interpolation between
-    neighbours (exact only to second order: 6.3 um rms off for P(s) at 100 Hz). Before the
-    first sample the output is at rest. Output unit of ``ys``.
+    For a :class:`StartRun` that carries its simulation and ``offset != 0``: the model's exact
+    output at that point for the input held over each interval (:class:`hasel.lti.ZohAt`; the
+    same numbers as ``LinearSim(..., offset).run``, to rounding once :func:`estimate_timing` has
+    filtered the states of this run, bit for bit before). Otherwise (a plain array, or a run
+    without its simulation): linear interpolation between neighbours (exact only to second
+    order: 6.3 um rms off for P(s) at 100 Hz). Before the first sample the output is at rest.
+    Output unit of ``ys``.
     """
-    src = getattr(ys, "_src", None)
-    if src is not None and offset != 0.0:
-        sim, u, cache = src
-        X = cache.get("X")
-        if X is not None:   # the states are there already (the timing estimate): one row, no new filter
-            c, d = sim._zohat().rows(offset if offset > 0 else 1.0 + offset)
-            if offset > 0:
-                return ys._scale * (X @ c + d * u)
-            return ys._scale * np.concatenate([[X[0] @ c + d * u[0]], X[:-1] @ c + d * u[:-1]])
-        frac = sim._build_frac(float(offset))
-        if frac is not None:
-            return ys._scale * sim._run_frac(u, frac)
+    if isinstance(ys, StartRun):
+        run, ys = ys, ys.ys
+        if run.sim is not None and offset != 0.0:
+            sim, u = run.sim, run.u
+            X = run.cache.get("X")
+            if X is not None:   # the states are there already (the timing estimate): one row, no new filter
+                c, d = sim._zohat().rows(offset if offset > 0 else 1.0 + offset)
+                if offset > 0:
+                    return run.scale * (X @ c + d * u)
+                return run.scale * np.concatenate([[X[0] @ c + d * u[0]], X[:-1] @ c + d * u[:-1]])
+            frac = sim._build_frac(float(offset))
+            if frac is not None:
+                return run.scale * sim._run_frac(u, frac)
     ys = np.asarray(ys)
     if offset >= 0.0:
         return ys[:-1] + offset * (ys[1:] - ys[:-1])
@@ -556,7 +552,6 @@ def at_offset(ys: np.ndarray, offset: float) -> np.ndarray:
 
 def _timing_linear(ys: np.ndarray, y: np.ndarray, mask: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     """:func:`estimate_timing` on the linear interpolation between interval starts (closed form per side)."""
-    ys = np.asarray(ys)
     best = (0.0, float("inf"))
     for side_lo, side_hi in ((max(lo, 0.0), hi), (lo, min(hi, 0.0))):
         if side_lo > side_hi:
@@ -575,7 +570,7 @@ def _timing_linear(ys: np.ndarray, y: np.ndarray, mask: np.ndarray, lo: float, h
     return best
 
 
-def _timing_exact(ys: "StartOutputs", y: np.ndarray, mask: np.ndarray, lo: float,
+def _timing_exact(run: StartRun, y: np.ndarray, mask: np.ndarray, lo: float,
                   hi: float) -> tuple[float, float] | None:
     """:func:`estimate_timing` on the model's exact output between interval starts (``None``: not available).
 
@@ -586,8 +581,8 @@ def _timing_exact(ys: "StartOutputs", y: np.ndarray, mask: np.ndarray, lo: float
     exponential. Per side of zero (a held input changes there), a grid of 1/10 sample, then a
     bounded scalar search (to 1e-4 sample) around the best grid point.
     """
-    sim, u, cache = ys._src
-    k = ys._scale
+    sim, u, cache = run.sim, run.u, run.cache
+    k = run.scale
     try:
         z = sim._zohat()
         if "X" not in cache:
@@ -652,25 +647,29 @@ def _timing_exact(ys: "StartOutputs", y: np.ndarray, mask: np.ndarray, lo: float
     return best[0], max(best[1], 0.0)
 
 
-def estimate_timing(ys: np.ndarray, y: np.ndarray, mask: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
+def estimate_timing(ys: "StartRun | np.ndarray", y: np.ndarray, mask: np.ndarray, lo: float,
+                    hi: float) -> tuple[float, float]:
     """Output sampling offset (working samples, within ``[lo, hi]``) that best fits ``y`` on ``mask``.
 
-    ``ys`` are the model's interval-start outputs (``n + 1``, see :meth:`LinearSim.run_start`,
-    possibly times a scalar), ``y`` the measured output (its unit); an output offset is fitted
-    alongside (a nuisance too). With outputs of :meth:`LinearSim.run_start` the model's output at
-    each trial offset is exact for the held input (:func:`_timing_exact`: a grid and a bounded
-    scalar search per side of zero); for a plain array, the linear interpolation between interval
-    starts, piecewise linear in the offset, is fitted in closed form per side.
+    ``ys`` are the model's interval-start outputs (``n + 1``: a :class:`StartRun` of
+    :meth:`LinearSim.run_start`, possibly :meth:`StartRun.scaled`, or a plain array), ``y`` the
+    measured output (its unit); an output offset is fitted alongside (a nuisance too). For a run
+    that carries its simulation the model's output at each trial offset is exact for the held
+    input (:func:`_timing_exact`: a grid and a bounded scalar search per side of zero); otherwise
+    the linear interpolation between interval starts, piecewise linear in the offset, is fitted
+    in closed form per side.
 
     Returns
     -------
     (offset, sse) : the offset (working samples) and the residual sum of squares there (output unit squared).
     """
-    if getattr(ys, "_src", None) is not None:
-        got = _timing_exact(ys, y, mask, lo, hi)
-        if got is not None:
-            return got
-    return _timing_linear(ys, y, mask, lo, hi)
+    if isinstance(ys, StartRun):
+        if ys.sim is not None:
+            got = _timing_exact(ys, y, mask, lo, hi)
+            if got is not None:
+                return got
+        ys = ys.ys
+    return _timing_linear(np.asarray(ys, float), y, mask, lo, hi)
 
 
 def estimate_noise(r: np.ndarray, rate_hz: float, f_excited_hz: float) -> tuple[float, str]:
