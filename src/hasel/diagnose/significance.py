@@ -1,0 +1,170 @@
+"""Held-out significance of a candidate effect, and explanations that the data cannot separate.
+
+:func:`block_test` (a signed-rank test over held-out blocks) and :func:`coloured_z` (a z score
+against noise of the measured colour) decide whether an effect's improvement is more than noise;
+:func:`_alike` finds another explanation that scores like the chosen one, with the experiment
+that would separate them (:data:`_SEPARATING`).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hasel.diagnose.augment import LINEAR
+from hasel.diagnose.options import DiagnoseOptions
+from hasel.diagnose.prep import Prepared
+
+__all__ = ["block_test", "coloured_z"]
+
+
+def _block_labels(prep: Prepared, mask: str, min_blocks: int = 40, min_len: int = 5) -> np.ndarray:
+    """Block index of each stacked ``mask`` sample for the held-out test.
+
+    The blocks are the contiguous runs of the mask, record by record; when there are fewer
+    than ``min_blocks`` of them (a short log), each run is cut into equal pieces of at least
+    ``min_len`` samples until there are about that many (a rank test over ten blocks
+    cannot reach a small p-value whatever the data).
+    """
+    out, nb = [], 0
+    runs = []
+    for r in prep.records:
+        m = getattr(r, mask)
+        if not m.any():
+            continue
+        starts = np.concatenate([[True], ~m[:-1]]) & m
+        runs.append(np.cumsum(starts)[m] - 1)
+    n_runs = sum(int(x.max()) + 1 for x in runs)
+    for lab in runs:
+        if n_runs < min_blocks:
+            pieces = int(np.ceil(min_blocks / max(n_runs, 1)))
+            sub = np.zeros(lab.size, int)
+            for b in range(int(lab.max()) + 1):
+                idx = np.flatnonzero(lab == b)
+                k = max(1, min(pieces, idx.size // min_len))
+                sub[idx] = np.minimum(np.arange(idx.size) * k // max(idx.size, 1), k - 1)
+            lab = np.unique(lab * 10_000 + sub, return_inverse=True)[1]
+        lab = lab + nb
+        nb = int(lab.max()) + 1
+        out.append(lab)
+    return np.concatenate(out) if out else np.zeros(0, int)
+
+
+def block_test(e_old: np.ndarray, e_new: np.ndarray, labels: np.ndarray, slow_n: int = 0) -> float:
+    """Held-out improvement of a residual ``e_old -> e_new`` as a one-sided normal score over blocks.
+
+    Each residual first loses its slow part (a moving average over ``slow_n`` stacked samples,
+    several seconds of the log: a slow sensor offset wander is no evidence of an effect; 0
+    keeps it). Each held-out block's squared-error drop is then one observation, and the
+    drops are ranked by size (Wilcoxon's signed-rank test: coloured noise within a block
+    counts as it really varies, a few blocks with large drops neither make nor break the
+    test, and no noise level is assumed). The one-sided p-value is given as the normal score
+    with the same p-value. No noise floor enters.
+    """
+    from scipy import stats
+
+    nb = int(labels.max()) + 1 if labels.size else 0
+    if nb < 3:
+        return 0.0
+    if slow_n > 1:
+        e_old = e_old - _moving_average(e_old, slow_n)
+        e_new = e_new - _moving_average(e_new, slow_n)
+    d = (np.bincount(labels, weights=e_old * e_old, minlength=nb)
+         - np.bincount(labels, weights=e_new * e_new, minlength=nb))
+    if not np.any(d):
+        return 0.0
+    p = float(stats.wilcoxon(d, alternative="greater", zero_method="zsplit").pvalue)
+    return float(min(stats.norm.isf(max(p, 1e-300)), 40.0))
+
+
+def coloured_z(e_old: np.ndarray, e_new: np.ndarray, max_lag: int, slow_n: int = 0) -> float:
+    """Validation improvement ``e_old -> e_new`` against noise of the measured colour (a z score).
+
+    The drop of the squared error, ``sum(e_old^2 - e_new^2)``, would under noise alone have a
+    standard deviation of ``2 sqrt(delta' R delta)`` (``delta`` the change of the prediction,
+    ``R`` the noise covariance). ``R`` is taken from the autocovariance of ``e_new`` up to
+    ``max_lag`` samples with Bartlett weights (a Newey-West estimate: coloured noise and slow
+    wander within that span widen it; the model error still in ``e_new`` only makes it larger).
+    Unlike :func:`block_test` it credits an effect that shows in a few places only (steps'
+    transients, a clip). Both residuals first lose their slow part (a moving average over
+    ``slow_n`` samples), so that a fit to slow sensor wander earns nothing here.
+    """
+    if slow_n > 1:
+        e_old = e_old - _moving_average(e_old, slow_n)
+        e_new = e_new - _moving_average(e_new, slow_n)
+    delta = e_old - e_new
+    r = e_new - e_new.mean()
+    n = r.size
+    lag = int(max(0, min(max_lag, n // 4)))
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    fr, fd = np.fft.rfft(r, nfft), np.fft.rfft(delta, nfft)
+    acov = np.fft.irfft(fr * np.conj(fr), nfft)[:lag + 1] / n
+    cd = np.fft.irfft(fd * np.conj(fd), nfft)[:lag + 1]
+    w = 1.0 - np.arange(lag + 1) / (lag + 1.0)
+    var = float(acov[0] * cd[0] + 2.0 * np.sum(w[1:] * acov[1:] * cd[1:]))
+    var = max(var, float(acov[0] * cd[0]), 1e-300)
+    return float(np.sum(e_old ** 2 - e_new ** 2) / (2.0 * math.sqrt(var)))
+
+
+def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average over ``n`` samples (ends padded with the end values)."""
+    n = int(min(max(n, 1), x.size))
+    pad = np.concatenate([np.full(n // 2, x[0]), x, np.full(n - n // 2 - 1, x[-1])])
+    c = np.cumsum(np.concatenate([[0.0], pad]))
+    return (c[n:] - c[:-n]) / n
+
+
+#: The experiment that separates two explanations that score alike (either order).
+_SEPARATING = {
+    frozenset(("static_nonlinearity", "sensor_nonlinearity")):
+        "an input-side and an output-side map differ in how their harmonics pass the dynamics: a band that "
+        "reaches above the resonance (the input-side map's harmonics are filtered there, the sensor's are not), "
+        "or slow steps at several levels with a fast sweep on top, separates them",
+    frozenset(("hysteresis", "static_nonlinearity")):
+        "a static map has no loop and a hysteresis keeps its loop at any rate: the same amplitude swept very "
+        "slowly (well below the first resonance) in both directions, at two amplitudes, separates them",
+    frozenset(("hysteresis", "sensor_nonlinearity")):
+        "a very slow sweep in both directions: a sensor curve has no loop, a hysteresis keeps one",
+    frozenset(("load_mass", "time_delay")):
+        "a load moves the magnitude near the resonance, a delay only the phase (linear in frequency): a "
+        "sweep through the resonance with enough amplitude there separates them",
+    frozenset(("saturation", "sensor_nonlinearity")):
+        "a clip piles samples on one value, a curve bends the whole range: a larger amplitude that drives "
+        "the output further into the limit separates them",
+    frozenset(("saturation", "static_nonlinearity")):
+        "a larger amplitude: a limit flattens the response beyond one value, a map bends the whole range",
+    frozenset(("charge_drift", "load_mass")):
+        "a drift follows the history of the input: a long hold at a high level then at a low one separates it "
+        "from a change of the dynamics",
+    frozenset(("asymmetric_dynamics", "hysteresis")):
+        "a direction-dependent lag fades at slow rates, a hysteresis does not: the same steps at two rates "
+        "separate them",
+}
+
+
+def _alike(results: list[tuple], eff_new: dict, e_new: np.ndarray, mse_ho: float, gain: float,
+           labels_va: np.ndarray, opts: DiagnoseOptions, to_nrmse, slow_n: int = 0) -> dict | None:
+    """The best other explanation when it scores like the chosen one on validation, else None.
+
+    Another explanation (a candidate set holding none of the newly chosen effects) is alike
+    when it removes at least ``opts.alike_share`` of what the chosen removes and the held-out
+    block test does not prefer the chosen one by ``opts.t_min``.
+    """
+    new = [k for k in eff_new if k != LINEAR and not k.startswith("_")]
+    for r in results:
+        names = [k for k in r[6] if k != LINEAR]
+        if set(names) & set(new) or not names:
+            continue
+        g_alt = (mse_ho - r[0]) / mse_ho if mse_ho > 0 else 0.0
+        if g_alt <= 0 or g_alt < opts.alike_share * gain:
+            return None  # sorted by validation error: no later one is alike either
+        pref = block_test(r[5], e_new, labels_va, slow_n)
+        if pref >= opts.t_min:
+            continue
+        key = frozenset((new[-1], names[-1])) if new else frozenset()
+        return {"chosen": " + ".join(new), "alternative": " + ".join(names),
+                "validation_nrmse": {"chosen": to_nrmse(mse_ho * (1 - gain)), "alternative": to_nrmse(r[0])},
+                "gap_removed": {"chosen": gain, "alternative": g_alt}, "preference": pref,
+                "experiment": _SEPARATING.get(key, "another band, another rate or another amplitude, where the two "
+                                                   "explanations predict different outputs")}
+    return None

@@ -1,0 +1,100 @@
+"""The verdict's words: why each named effect was named (:func:`_evidence`), in the data's units."""
+from __future__ import annotations
+
+from hasel.diagnose.augment import EffectFit, Pipeline
+from hasel.effects.load import load_offset
+
+__all__: list[str] = []
+
+
+def _repeat_text(tm: dict) -> str:
+    rp = tm.get("repeats") or {}
+    if rp.get("repeat_difference_rms") is None:
+        return ""
+    return (f"; between repeats of the excitation ({rp['period_s']:.3g} s apart) the residual changes by "
+            f"{rp['repeat_difference_rms']:.3g} rms ({rp['over_noise']:.1f} x noise), "
+            f"{rp['mean_change_per_period']:+.3g} on average")
+
+
+def _rate_unit(unit: str) -> str:
+    """A rate's unit from a signal's unit name ("kV" -> "kV/s"); "per second" without one."""
+    return f" {unit}/s" if unit else " per second"
+
+
+def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "") -> str:
+    if fit.variant == "slew":
+        return (f"the residual appears where the input moves fast (steps, the fast part of a sweep), whatever "
+                f"the level, and its lag grows with amplitude times frequency: the input cannot move faster "
+                f"than {fit.theta[0]:.4g}{_rate_unit(input_unit)} (a slew-rate limit)")
+    side, end = fit.variant.split(":")
+    if side == "measured":
+        clipped = lv.get("clipped_output", {})
+        ends = [e for e in ("lower", "upper") if e in clipped and (end == "both" or end == e)]
+        return ("the measured output piles up on " + " and ".join(
+            f"{clipped[e]['value']:.4g} ({clipped[e]['samples']} samples, its {e} end)" for e in ends)
+                + " while the model goes beyond: the measured range is clipped there")
+    return (f"the residual is confined to the {end} end of the {side} range: a hard limit at "
+            f"{fit.theta[0]:.4g}")
+
+
+def _tau(x: float) -> str:
+    return "0 s (at once)" if x < 1e-6 else f"{x:.3g} s"
+
+
+def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tuple[str, float] | None,
+              pipe: Pipeline, units: tuple[str, str] = ("", ""), credit_final: float | None = None) -> str:
+    lv, dr, tm, fr = where["level"], where["direction"], where["time"], where["frequency"]
+    me = fr["model_error"]
+    bands = me.get("significant_bands_hz") or []
+    band_txt = ", ".join(f"{a:.3g}-{b:.3g} Hz" for a, b in bands[:3]) or "no band"
+    level_share = max(lv['share_input_level'], lv['share_output_level'])
+    sig = {
+        "static_nonlinearity": lambda: ((f"the residual follows the operating level (level bins explain "
+                                         f"{_pct(level_share)} of it, the direction {_pct(dr['extra_share'])} more)"
+                                         if level_share >= 0.05 else
+                                         f"a level-dependent gain shows in the fit though level bins alone explain "
+                                         f"{_pct(level_share)} of the residual (a map is curved within each bin)")
+                                        + f"; the distortion passes through the dynamics ({fit.variant} map)"),
+        "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
+                                f"explain {_pct(lv['share_instant_output'])}) applied after the dynamics: "
+                                f"an output-side map fits better than an input-side one"),
+        "saturation": lambda: _saturation_text(fit, lv, units[0]),
+        "time_delay": lambda: (f"the residual tracks the nominal output's rate (correlation "
+                       f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
+                       f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
+        "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {_pct(me['linear_share'])} of "
+                      f"the residual, significant in {band_txt}): the resonance and gain moved "
+                      f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g}"
+                      + (f", and the load's weight offsets the output by {load_offset(fit):+.3g})" if "sag" in fit.variant.split(":")
+                         else ")")),
+        "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
+                       f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
+                       f"direction adds {_pct(dr['extra_share'])} to the level's share; at equal input "
+                       f"levels the input's direction adds {_pct(dr.get('input_direction_extra_share', 0.0))}) "
+                       f"and a rate-independent play-operator memory explains it"
+                       + (f", the log starting on the {'rising' if fit.theta[-1] < 0 else 'falling'} branch "
+                          f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
+        "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
+                                f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
+                                + (f"cannot move faster than {fit.theta[0]:.4g}{_rate_unit(units[1])} while "
+                                   f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
+                                   if fit.variant.startswith("rate_limit") else
+                                   f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}")),
+        "charge_drift": lambda: (f"the residual varies slowly in time (slow share {_pct(tm['slow_share'])}, trend "
+                                 f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
+                                 f"{fit.theta[0]:.3g} s), not its present level" + _repeat_text(tm)),
+    }[name]()
+    txt = f"{sig}; taken out alone, {_pct(gain)} of the nominal residual energy comes back on validation"
+    if credit_final is not None:
+        txt += f" ({_pct(credit_final)} on the final held-out samples)"
+    if runner_up is not None and runner_up[1] > 0:
+        txt += f" (next best when it was chosen: {runner_up[0]}, removing {_pct(runner_up[1])})"
+    return txt
+
+
+def _pct(x: float) -> str:
+    """A share as a percentage, never a bare "0 %": below half a percent it says so."""
+    x = float(x)
+    if abs(x) < 0.005:
+        return "less than 0.5 %" if x >= 0 else "a negative share (it helps nothing)"
+    return f"{100 * x:.0f} %" if abs(x) >= 0.1 else f"{100 * x:.1f} %"
