@@ -247,7 +247,8 @@ def test_drift_is_told_from_a_static_map_by_the_change_between_repeats():
 def test_a_fallback_nominal_is_flagged_when_identify_refuses_the_log():
     """Without --model, a log that hasel.ident refuses (a stroke clip at 4 mm and a strong input map make
     no linear model pass its checks) falls back to the internal fit: the verdict must say so, first."""
-    from hasel.diagnose.core import Verdict, _identify
+    from hasel.diagnose.core import Verdict
+    from hasel.diagnose.setup_stages import _identify
     from hasel.diagnose.report import verdict_lines
 
     rng = np.random.default_rng(31)

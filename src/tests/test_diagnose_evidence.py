@@ -10,7 +10,7 @@ import pytest
 
 from hasel import paper
 from hasel.diagnose import DiagnoseOptions, diagnose
-from hasel.diagnose.core import timing_stage
+from hasel.diagnose.setup_stages import timing_stage
 from hasel.diagnose.prep import prepare
 from hasel.effects.load import loaded_den
 from hasel_bench.othersim import FohSystem, excitation

@@ -11,8 +11,9 @@ import pytest
 
 from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.diagnose.augment import EffectFit, Pipeline
-from hasel.diagnose.core import DiagnosisFailed, _generalise, timing_stage
+from hasel.diagnose.core import DiagnosisFailed, _generalise
 from hasel.diagnose.prep import LinearSim, prepare
+from hasel.diagnose.setup_stages import timing_stage
 from hasel.diagnose.significance import _alike, _block_labels, block_test
 from hasel_bench.othersim import make_free_case
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hasel import paper
-from hasel.diagnose.core import timing_stage
+from hasel.diagnose.setup_stages import timing_stage
 from hasel.diagnose.prep import LinearSim, at_offset, estimate_timing, prepare
 
 RATE = 100.0     # Hz: P(s) resonates near 19 Hz, so the output is far from straight between samples
@@ -126,7 +126,8 @@ def test_a_model_identified_from_the_log_is_simulated_as_it_was_fitted():
 
 def test_the_model_stage_turns_the_exact_read_off_only_for_an_identified_model():
     """Given a model the prepared log keeps ``exact_offset``; identifying one from the log turns it off."""
-    from hasel.diagnose.core import DiagnoseOptions, _model_stage
+    from hasel.diagnose.core import DiagnoseOptions
+    from hasel.diagnose.setup_stages import _model_stage
     rng = np.random.default_rng(5)
     n = 4000
     t = np.arange(n) / 200.0
@@ -145,7 +146,8 @@ def test_the_model_stage_turns_the_exact_read_off_only_for_an_identified_model()
 def test_a_model_fitted_with_the_interpolating_read_keeps_it_and_block_means_are_read_exactly():
     """A given model whose JSON says ``sample_read: interpolated`` (hasel identify's) is simulated that way; the
     exact P(s) on a log reduced by block means (decimation > 1) is read exactly."""
-    from hasel.diagnose.core import DiagnoseOptions, _model_stage, _nominal_model
+    from hasel.diagnose.core import DiagnoseOptions
+    from hasel.diagnose.setup_stages import _model_stage, _nominal_model
     rng = np.random.default_rng(7)
     fs = 2000.0
     n = 16000
