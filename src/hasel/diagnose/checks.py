@@ -167,9 +167,15 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
     rest = _without(st.current, name)
     fit = fit_family(ctx.pipe, rest, other)
     if fit is None:
+        ctx.say(f"map side with the others in place: {other} could not be fitted beside them; {name} kept")
         return
     alt = joint_refine(ctx.pipe, {**rest, other: fit}, max_nfev=ctx.opts.joint_refine_nfev)
-    if other not in alt or linear_static(ctx.pipe, alt) or _raises(ctx, alt):
+    why = ("its joint refinement dropped it" if other not in alt else
+           "it came out a gain and an offset" if linear_static(ctx.pipe, alt) else
+           "the set raises a resonance" if _raises(ctx, alt) else "")
+    if why:
+        # said, because a check that silently does not run reads like one that kept the map
+        ctx.say(f"map side with the others in place: {other} not compared ({why}); {name} kept")
         return
     m_tr, m_ho, e_alt = ctx.scores(alt)
     # the forward selection's own choice between two sets (near-ties to fewer parameters, then the prior)
