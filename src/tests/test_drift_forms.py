@@ -84,7 +84,7 @@ def test_two_tau_stage_in_chunks_equals_one_call(chunk):
     u = 3.0 + np.cumsum(rng.standard_normal(6000)) * 0.05
     y = 2.0 + 0.4 * u + 0.01 * rng.standard_normal(u.size)
     scales = SimpleNamespace(u_c=3.0, u_s=2.5, y_c=2.0, y_s=1.5, thresholds=(), tau_smooth_s=None)
-    fit = EffectFit("charge_drift", TWO_TAU, (0.8, 6.0, -0.1, 0.02, 0.05))
+    fit = EffectFit("charge_drift", TWO_TAU, (0.8, 6.0, -0.1, 0.05))
     fam = family("charge_drift")
     whole = fam.stage(fit, scales, dt)
     whole.reset(float(y[0]))
@@ -95,10 +95,10 @@ def test_two_tau_stage_in_chunks_equals_one_call(chunk):
     qf, qs, _ = charges2(np.full(100, 4.0), dt, 0.8, 6.0)
     np.testing.assert_allclose(qf, 4.0, rtol=1e-12)
     np.testing.assert_allclose(qs, 4.0, rtol=1e-12)
-    # the law: y (1 + g_s q_s) + o_f q_f + o_s q_s with the charges over u_s, offsets in mm
+    # the law: y + o_f q_f + o_s q_s with the charges over u_s, offsets in mm
     qf, qs, _ = charges2(u, dt, 0.8, 6.0)
     qf, qs = qf / 2.5, qs / 2.5
-    expect = y * (1 + 0.02 * qs) + 1.5 * (-0.1 * qf + 0.05 * qs)
+    expect = y + 1.5 * (-0.1 * qf + 0.05 * qs)
     np.testing.assert_allclose(w, expect, rtol=1e-12)
     assert isinstance(whole, Drift2Stage)
     assert fam.param_names(fit)[:2] == ("tau_fast_s", "tau_slow_s")

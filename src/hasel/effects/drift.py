@@ -8,16 +8,17 @@ Forms
 - generic ``output`` (``theta = (tau, g, o)``): ``y (1 + g q) + y_s o q``, ``q`` the same
   low-pass of the input pre-smoothed by two first-order stages (a tenth of the shortest
   drift time constant, :func:`smoothing_s`), over the input's half-range ``u_s``.
-- generic ``output:2tau`` (``theta = (tau_fast, tau_slow, o_fast, g_slow, o_slow)``): charge
-  trapped at two depths, ``y (1 + g_s q_s) + y_s (o_f q_f + o_s q_s)``, ``q_f`` and ``q_s``
+- generic ``output:2tau`` (``theta = (tau_fast, tau_slow, o_fast, o_slow)``): charge trapped
+  at two depths screening the voltage, ``y + y_s (o_f q_f + o_s q_s)``, ``q_f`` and ``q_s``
   low-passes (``tau_fast`` >= :func:`tau_fast_min`, about a second on the paper's model;
   ``tau_slow`` >= :func:`tau_min`) of the input pre-smoothed twice by a tenth of ``tau_fast``,
   over ``u_s``, started charged at the first input (at rest with it, as the linear model is
-  started). The fast charge screens the voltage (an offset linear in the input's history, no
-  gain term: ``y q_f`` with a second-long ``q_f`` is a static quadratic map on a slow command;
-  ``tau_fast`` <= half of :func:`tau_min`); the deep charge acts as in ``output``; both offsets
-  of one sign (charge of one polarity at both depths: opposite signs make a band-pass that fits
-  slow residuals of other effects). Fitted beside ``output`` and taken only when it lowers
+  started). Linear in the input's history (no gain term: ``y q`` with a charge of seconds is a
+  static quadratic map on a slow command, and with it the form stood in for an end stop and
+  for wandering noise: multi2.py seed 21 case 6, free_indep.py seed 11); ``tau_fast`` <= half of
+  :func:`tau_min`, ``tau_slow`` >= :func:`tau_min`; both offsets of one sign (charge of one
+  polarity at both depths: opposite signs make a band-pass that fits slow residuals of other
+  effects). A gain or offset drift with one slow time constant stays ``output``'s. Fitted beside ``output`` and taken only when it lowers
   the training BIC.
 
 The truth and ``output`` run :class:`DriftStage` (a chain of first-order low-passes from zero,
@@ -165,17 +166,17 @@ def charges2(x: np.ndarray, dt_s: float, tau_fast_s: float, tau_slow_s: float, z
 
 class Drift2Stage:
     """The ``output:2tau`` form chunk by chunk: charges :func:`charges2` (over ``u_scale``) and the law
-    ``y (1 + g_s q_s) + o_f q_f + o_s q_s`` (offsets in output units).
+    ``y + o_f q_f + o_s q_s`` (offsets in output units per input half-range of charge).
 
     :meth:`reset` puts the filters at rest with its ``x0`` (or, with the input ``u`` given to :meth:`run`,
     with the first input sample after the reset).
     """
 
     def __init__(self, dt_s: float, tau_fast_s: float, tau_slow_s: float, u_scale: float,
-                 gain_slow: float, offsets: tuple[float, float]) -> None:
+                 offsets: tuple[float, float]) -> None:
         self.dt_s, self.taus = float(dt_s), (float(tau_fast_s), float(tau_slow_s))
         self.u_scale = float(u_scale)
-        self.gain, self.offsets = float(gain_slow), tuple(map(float, offsets))
+        self.offsets = tuple(map(float, offsets))
         self.zi: list | None = None
         self._fresh = True
 
@@ -192,7 +193,7 @@ class Drift2Stage:
         qf, qs, self.zi = charges2(v, self.dt_s, *self.taus, None if self._fresh else self.zi)
         self._fresh = False
         qf, qs = qf / self.u_scale, qs / self.u_scale
-        return x * (1.0 + self.gain * qs) + self.offsets[0] * qf + self.offsets[1] * qs
+        return x + self.offsets[0] * qf + self.offsets[1] * qs
 
 
 def tau_min(pipe) -> float:
@@ -240,9 +241,9 @@ def _charges2_pipe(pipe, x: np.ndarray, tf: float, tsl: float) -> tuple[np.ndarr
 def pipe_output(pipe, x: np.ndarray, y: np.ndarray, fit: EffectFit) -> np.ndarray:
     """Output ``y`` of the diagnosis's chain with the drift ``fit`` of a non-``output`` variant driven by
     the (delayed, clipped) input ``x``, whole record (used by ``Pipeline.stages``)."""
-    tf, tsl, of, gs, os_ = fit.theta
+    tf, tsl, of, os_ = fit.theta
     qf, qs = _charges2_pipe(pipe, x, tf, tsl)
-    return y * (1.0 + gs * qs) + pipe.y_s * (of * qf + os_ * qs)
+    return y + pipe.y_s * (of * qf + os_ * qs)
 
 
 def _bic_better(n: int, s0: float, s1: float, extra: int) -> bool:
@@ -303,14 +304,13 @@ def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
         key = (round(tf, 9), round(tsl, 9))
         if key in cache:
             return cache[key]
-        G = np.zeros((3, 3))
-        h = np.zeros(3)
+        G = np.zeros((2, 2))
+        h = np.zeros(2)
         full = []
         for m, x, ya, rm, box in recs:
             qf, qs, _ = charges2(x, pipe.prep.dt_s, tf, tsl)
             qf, qs = qf[m] / pipe.u_s, qs[m] / pipe.u_s
-            yam = ya[m]
-            B = np.column_stack([pipe.y_s * qf, yam * qs, pipe.y_s * qs])
+            B = np.column_stack([pipe.y_s * qf, pipe.y_s * qs])
             Bs, rs = box(B), box(rm)
             G += Bs.T @ Bs
             h += Bs.T @ rs
@@ -319,7 +319,7 @@ def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
         scale[scale == 0] = 1.0
         sol = np.linalg.lstsq(G / np.outer(scale, scale), h / scale, rcond=1e-12)[0] / scale
         sse = sum(sumsq(rm - Bm @ sol) for Bm, rm in full)
-        if sol[0] * sol[2] < 0:  # offsets of opposite signs: not one polarity of charge at two depths
+        if sol[0] * sol[1] < 0:  # offsets of opposite signs: not one polarity of charge at two depths
             sse = math.inf
         f = EffectFit("charge_drift", TWO_TAU, (float(tf), float(tsl)) + tuple(float(w) for w in sol))
         cache[key] = (sse, f)
@@ -465,19 +465,18 @@ class DriftFamily(EffectFamily):
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("tau_s", "gain_per_charge", "offset_per_charge")`` (charge in input half-ranges); ``output:2tau``:
-        ``("tau_fast_s", "tau_slow_s", "offset_per_fast_charge", "gain_per_slow_charge",
-        "offset_per_slow_charge")`` (offsets in output half-ranges)."""
+        ``("tau_fast_s", "tau_slow_s", "offset_per_fast_charge", "offset_per_slow_charge")`` (offsets in
+        output half-ranges)."""
         if fit.variant == TWO_TAU:
-            return ("tau_fast_s", "tau_slow_s", "offset_per_fast_charge", "gain_per_slow_charge",
-                    "offset_per_slow_charge")
+            return ("tau_fast_s", "tau_slow_s", "offset_per_fast_charge", "offset_per_slow_charge")
         return ("tau_s", "gain_per_charge", "offset_per_charge")
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> "DriftStage | Drift2Stage":
         """The generic form; the pre-smoothing from ``scales.tau_smooth_s`` or :func:`smoothing_s`
         (``output:2tau``: a tenth of its fast time constant)."""
         if fit.variant == TWO_TAU:
-            tf, tsl, of, gs, os_ = fit.theta
-            return Drift2Stage(dt_s, tf, tsl, scales.u_s, gs, (scales.y_s * of, scales.y_s * os_))
+            tf, tsl, of, os_ = fit.theta
+            return Drift2Stage(dt_s, tf, tsl, scales.u_s, (scales.y_s * of, scales.y_s * os_))
         ts = getattr(scales, "tau_smooth_s", None) or smoothing_s(scales)
         tau, g, o = fit.theta
         return DriftStage(dt_s, (ts, ts, tau), 1.0 / scales.u_s, g, scales.y_s * o)
@@ -497,21 +496,19 @@ class DriftFamily(EffectFamily):
         TWO_TAU_FAST_MAX tau_min``, ``tau_min <= tau_slow <= 10 x the log``)."""
         if fit.variant == TWO_TAU:
             t0, t1 = tau_fast_min(ctx), 10 * ctx.span_s
-            return (np.array([t0, max(TWO_TAU_RATIO_MIN * t0, tau_min(ctx)), -np.inf, -np.inf, -np.inf]),
-                    np.array([max(t0, TWO_TAU_FAST_MAX * tau_min(ctx)), t1, np.inf, np.inf, np.inf]))
+            return (np.array([t0, max(TWO_TAU_RATIO_MIN * t0, tau_min(ctx)), -np.inf, -np.inf]),
+                    np.array([max(t0, TWO_TAU_FAST_MAX * tau_min(ctx)), t1, np.inf, np.inf]))
         return np.array([tau_min(ctx), -np.inf, -np.inf]), np.array([10 * ctx.span_s, np.inf, np.inf])
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Time constant (s), gain change per input half-range, offset per input half-range (output unit);
-        ``output:2tau``: both time constants (s), the fast charge's offset, the slow one's gain change and
-        offset, per input half-range."""
+        ``output:2tau``: both time constants (s), each charge's offset per input half-range."""
         th = fit.theta
         if fit.variant == TWO_TAU:
             return {"variant": fit.variant, "tau_fast_s": th[0], "tau_slow_s": th[1],
                     "offset_per_input_half_range_fast": th[2] * ctx.y_s,
-                    "gain_change_per_input_half_range_slow": th[3],
-                    "offset_per_input_half_range_slow": th[4] * ctx.y_s, "unit": units[1]}
+                    "offset_per_input_half_range_slow": th[3] * ctx.y_s, "unit": units[1]}
         return {"variant": fit.variant, "tau_s": th[0], "gain_change_per_input_half_range": th[1],
                 "offset_per_input_half_range": th[2] * ctx.y_s, "unit": units[1]}
 
