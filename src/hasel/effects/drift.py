@@ -18,8 +18,8 @@ Forms
   for wandering noise: multi2.py seed 21 case 6, free_indep.py seed 11); ``tau_fast`` <= half of
   :func:`tau_min`, ``tau_slow`` >= :func:`tau_min`; both offsets of one sign (charge of one
   polarity at both depths: opposite signs make a band-pass that fits slow residuals of other
-  effects). A gain or offset drift with one slow time constant stays ``output``'s. Fitted beside ``output`` and taken only when it lowers
-  the training BIC.
+  effects). A gain or offset drift with one slow time constant stays ``output``'s. Fitted
+  beside ``output`` and taken only when it lowers the training BIC.
 
 The truth and ``output`` run :class:`DriftStage` (a chain of first-order low-passes from zero,
 their states carried between chunks, and the law :func:`drift_law`); ``output:2tau`` runs
