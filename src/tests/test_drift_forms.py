@@ -18,7 +18,7 @@ RATE = 200.0  # Hz
 DUR = 60.0  # s
 TAU_FAST, TAU_SLOW = 2.0, 15.0  # s, the simulated trap's time constants
 #: how far a fitted time constant may be from the truth: a factor of 1.5 either way (the fast and slow
-#: charges trade a little of each other's share on 60 s of levels; measured 1.90 and 19.3 s)
+#: charges trade a little of each other's share on 60 s of levels; measured 2.04 and 18.2 s)
 TAU_FACTOR = 1.5
 
 
