@@ -14,8 +14,8 @@ Forms
   ``tau_slow`` >= :func:`tau_min`) of the input pre-smoothed twice by a tenth of ``tau_fast``,
   over ``u_s``, started charged at the first input (at rest with it, as the linear model is
   started). Linear in the input's history (no gain term: ``y q`` with a charge of seconds is a
-  static quadratic map on a slow command, and with it the form stood in for an end stop and
-  for wandering noise: multi2.py seed 21 case 6, free_indep.py seed 11); ``tau_fast`` <= half of
+  static quadratic map on a slow command, and with it the form stood in for an end stop:
+  multi2.py seed 21 case 6); ``tau_fast`` <= half of
   :func:`tau_min`, ``tau_slow`` >= :func:`tau_min`; both offsets of one sign (charge of one
   polarity at both depths: opposite signs make a band-pass that fits slow residuals of other
   effects). A gain or offset drift with one slow time constant stays ``output``'s. Fitted
