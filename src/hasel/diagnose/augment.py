@@ -73,6 +73,7 @@ from hasel.effects.base import LINEAR, SLOT_ORDER, EffectFit
 from hasel.effects.delay import delay_max as _delay_max
 from hasel.effects.delay import shift as _shift
 from hasel.effects.drift import _tau_min, fit_drift_on_repeats
+from hasel.effects.drift import pipe_output as drift_output
 from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonlinear, _fit_scalar,  # noqa: F401
                                   _ls, _poly_ls, _refine, _sse, _train_halves, _train_smooth, _with, fit_log_scalar,
                                   monomial, monomials, poly_map, rate_grid, sumsq)
@@ -267,7 +268,9 @@ class Pipeline:
             y = self._memo(("ya", ri) + key, lambda y=y, f=f: self._asym(y, f))
         out["y_asym"] = y
         f = e.get("charge_drift")
-        if f is not None:
+        if f is not None and f.variant != "output":
+            y = drift_output(self, out["x_sat"], y, f)
+        elif f is not None:
             q = self.charge(out["x_sat"], f.theta[0])
             y = y * (1.0 + f.theta[1] * q) + self.y_s * f.theta[2] * q
         out["y_drift"] = y
