@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+from scipy.special import expit
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls, _refine, _sse, _with, monomials,
@@ -37,7 +38,8 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "apply_input",
+__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
+           "dead_flat_share", "apply_input",
            "DEAD", "DEAD_GRID_QUANTILES", "map_sides", "InternalMapStage", "max_degree", "describe_dead", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
            "StaticMapFamily", "FAMILY"]
 
@@ -75,6 +77,11 @@ DEAD_WIDTH_BOUNDS = (1e-3, 0.25)
 DEAD_GAIN_BOUNDS = (0.1, 10.0)
 #: Function evaluations of the dead band's refinement from the best start (threshold, gain, width).
 DEAD_REFINE_NFEV = 10
+#: The dead band's flat zone: the inputs where its slope is below this share of its gain ``g`` (the
+#: band passes less than a tenth of a change there: below ``d - 2.2 w`` for a corner of width ``w``); its
+#: corner: the slope between this share and ``1 -`` it (within ``d +- 2.2 w``). A conventional 10 %/90 %
+#: split (as a rise time's), not tuned.
+DEAD_FLAT_SLOPE = 0.1
 
 
 @dataclass(frozen=True)
@@ -140,6 +147,49 @@ def dead_map(theta, x: np.ndarray) -> np.ndarray:
     d, g, w = (float(v) for v in theta[:3])
     x = np.asarray(x, float)
     return g * w * (np.logaddexp(0.0, (x - d) / w) - np.logaddexp(0.0, (-x - d) / w))
+
+
+def dead_slope(theta, x: np.ndarray) -> np.ndarray:
+    """The slope ``d dead_map / dx`` (dimensionless) of the dead band ``theta = (d, g, w)`` at the inputs
+    ``x`` (input unit): ``g (s((x - d) / w) + s((-x - d) / w))``, ``s`` the logistic function."""
+    d, g, w = (float(v) for v in theta[:3])
+    x = np.asarray(x, float)
+    return g * (expit((x - d) / w) + expit((-x - d) / w))
+
+
+def dead_zone_shares(theta, x: np.ndarray) -> tuple[float, float]:
+    """The shares (0-1) of the inputs ``x`` (input unit) in the dead band's flat zone (its slope below
+    :data:`DEAD_FLAT_SLOPE` times its gain ``g``) and on its corner (the slope between that and
+    ``(1 - DEAD_FLAT_SLOPE) g``; :func:`dead_slope`); (0, 0) for no samples."""
+    x = np.asarray(x, float)
+    if x.size == 0:
+        return 0.0, 0.0
+    g = abs(float(theta[1]))
+    sl = np.abs(dead_slope(theta, x))
+    flat = sl < DEAD_FLAT_SLOPE * g
+    corner = ~flat & (sl < (1.0 - DEAD_FLAT_SLOPE) * g)
+    return float(np.mean(flat)), float(np.mean(corner))
+
+
+def dead_visited(theta, x: np.ndarray) -> bool:
+    """Whether the inputs ``x`` (input unit) show the dead band ``theta`` as a threshold: some of them lie in
+    its flat zone, and at least as many there as on its corner (:func:`dead_zone_shares`).
+
+    A dead band differs from a smooth convex curve by its flat zone; where the data lie mostly on the
+    corner, the fit describes a bend (with an offset), and its threshold and width are those of a curve,
+    not of a band. The cascaded tanks' pump curve (``bench/tune_diag/datasets.py``: a level growing with
+    the square of the pump voltage, driven 0.4-6.5 V) took the form with its width at the bound, 0 % of
+    its input flat and 87 % on the corner. The rule has no tuned constant (flat against corner, both by
+    :data:`DEAD_FLAT_SLOPE`); on the tuning sets (``deadzones.py`` seed 1, ``multi2.py`` seed 21) the
+    named dead bands had flat shares of 1-35 % against corner shares of 0-12 %, the soft bands whose
+    corner is as wide as the band (``dz_10``, ``dz_14``: flat 0 %) go to the polynomial (the base's names)."""
+    flat, corner = dead_zone_shares(theta, x)
+    return flat > 0.0 and flat >= corner
+
+
+def dead_flat_share(theta, x: np.ndarray) -> float:
+    """The share (0-1) of the inputs ``x`` (input unit) in the dead band's flat zone (:func:`dead_zone_shares`)."""
+    return dead_zone_shares(theta, x)[0]
 
 
 def apply_input(fit: EffectFit, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
@@ -247,6 +297,12 @@ def _dead_starts(pipe: FitContext, base: dict[str, EffectFit], grid: np.ndarray,
     return EffectFit("static_nonlinearity", DEAD, (float(grid[k]), float(g[k]), float(w)))
 
 
+def _map_inputs(pipe: FitContext, base: dict[str, EffectFit]) -> np.ndarray:
+    """The input-side map's input (input unit) on the training samples of every record, ``base`` before it."""
+    return np.concatenate([pipe.stages(base, ri)["x_map"][rec.train] for ri, rec in enumerate(pipe.prep.records)
+                           if rec.train.any()] or [np.zeros(0)])
+
+
 def fit_dead(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     """The dead band (:data:`DEAD`) fitted with ``effects`` fixed: thresholds at the quantiles
     :data:`DEAD_GRID_QUANTILES` of the map's input ``|x|`` (training samples), each with its gain by least
@@ -256,9 +312,7 @@ def fit_dead(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | Non
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     if getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
         return None
-    xs = np.concatenate([pipe.stages(base, ri)["x_map"][rec.train] for ri, rec in enumerate(pipe.prep.records)
-                         if rec.train.any()])
-    ax = np.abs(xs)
+    ax = np.abs(_map_inputs(pipe, base))
     if ax.size < 10:
         return None
     grid = np.unique(np.round(np.quantile(ax, DEAD_GRID_QUANTILES), 9))
@@ -285,11 +339,13 @@ def _bic_prefers(n: int, s_a: float, k_a: int, s_b: float, k_b: int) -> bool:
 def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit:
     """The input-side map with ``effects`` fixed: the polynomial (:func:`fit_variant`), or the dead band
     (:func:`fit_dead`) when it lowers the training BIC and is not nearly a line (:func:`linear_static`'s
-    rule: a band the input never crosses is a gain and an offset, the load's and the polynomial's)."""
+    rule: a band the input never crosses is a gain and an offset, the load's and the polynomial's) and the
+    data see its flat zone at least as often as its corner (:func:`dead_visited`: else the data see a bend,
+    a curve the polynomial describes)."""
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     poly = fit_variant(pipe, effects, "input")
     dead = fit_dead(pipe, effects)
-    if dead is None:
+    if dead is None or not dead_visited(dead.theta, _map_inputs(pipe, base)):
         return poly
     r = pipe.residuals(_with(base, dead), "train")
     s_d = sumsq(r)
@@ -454,8 +510,8 @@ def map_sides(ctx: FitContext, effects: dict[str, EffectFit]) -> dict:
 
 
 def describe_dead(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effects: dict[str, EffectFit]) -> dict:
-    """A dead band's description: threshold and width (input unit), gain, the share of the training input
-    samples within the threshold, the effective input's deviation on 9 points and the output offset at
+    """A dead band's description: threshold and width (input unit), gain, the shares of the training input
+    samples within the threshold and in its flat zone (:func:`dead_flat_share`), the effective input's deviation on 9 points and the output offset at
     the input's centre (output unit)."""
     ui, uo = units
     d, g, w = fit.theta[:3]
@@ -469,8 +525,10 @@ def describe_dead(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effec
     try:
         x = np.concatenate([r.u[r.train] for r in ctx.prep.records if r.train.any()])
         out["share_within_threshold"] = float(np.mean(np.abs(x) < d)) if x.size else None
+        out["share_flat"] = dead_flat_share(fit.theta, x) if x.size else None
     except (AttributeError, ValueError):
         out["share_within_threshold"] = None
+        out["share_flat"] = None
     g0 = ctx.linear_of(effects or {}).dc_gain
     out["output_offset_at_centre"] = float(g0 * (dead_map(fit.theta, np.array([c]))[0] - c))
     out["output_offset_unit"] = uo
