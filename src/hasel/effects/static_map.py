@@ -17,7 +17,8 @@ Forms
   bipolar drive sees the same band on both sides. A polynomial in the voltage cannot follow the corner
   (its error beside the corner was taken by a load's gain and a sensor curve: ``bench/tune_diag/multi2.py``
   seed 21, ``m2_00``); it is fitted beside the polynomial and taken when it lowers the training BIC
-  (:func:`fit_input_side`).
+  and the data see its flat zone at least as often as its corner (:func:`fit_input_side`,
+  :func:`dead_visited`: else the form is a bend, a curve the polynomial describes).
 
 A map that is nearly a line (its curvature removes less than :data:`NEAR_LINEAR_SHARE`
 of what it removes beyond its offset, and less than :data:`CURVE_LEFT_SHARE` of what its best line leaves)
