@@ -85,6 +85,7 @@ from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
 from hasel.effects.saturation import measured_clip, slew_limit
 from hasel.effects.static_map import NEAR_LINEAR_SHARE, linear_static  # noqa: F401
+from hasel.effects.static_map import apply_input
 from hasel.effects.static_map import max_degree as _max_degree
 
 __all__ = ["EffectFit", "Pipeline", "fit_family", "linear_static", "fit_drift_on_repeats", "measured_clip",
@@ -229,10 +230,9 @@ class Pipeline:
             x = _clip(x, f)
         out["x_sat"] = x
         f = e.get("static_nonlinearity")
-        if f is not None and f.variant == "input":
-            key += ("mi",) + f.theta
-            z = (x - self.u_c) / self.u_s
-            x = x + self.u_s * poly_map(f.theta, z)
+        if f is not None and f.variant.split(":")[0] == "input":  # the polynomial or the dead band
+            key += ("mi", f.variant) + f.theta
+            x = apply_input(f, x, self.u_c, self.u_s)
         out["x_map"] = x
         f = e.get("hysteresis")
         if f is not None:

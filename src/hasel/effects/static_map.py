@@ -10,6 +10,15 @@ Forms
 - generic ``internal`` (``(b_0 .. b_d)``): ``y + G1(s sum_j b_j w^j)`` after the
   dynamics, ``w = (y - y_c) / y_s``, ``G1 = G / G(0)`` (a stiffness-like force fed back
   through the dynamics: it needs the linear model, ``scales.num``/``scales.den``).
+- generic ``input:dead`` (``theta = (threshold_kv, gain, width_kv)``, input units): a dead band before the
+  dynamics, ``g (w sp((x - d) / w) - w sp((-x - d) / w))``, ``sp(a) = log(1 + e^a)`` (:func:`dead_map`):
+  nothing passes below the threshold ``d`` (a HASEL does not move until the field overcomes the film's
+  stiffness), the rest passes with the gain ``g``, the corner rounded over about ``w``; odd, so a
+  bipolar drive sees the same band on both sides. A polynomial in the voltage cannot follow the corner
+  (its error beside the corner was taken by a load's gain and a sensor curve: ``bench/tune_diag/multi2.py``
+  seed 21, ``m2_00``); it is fitted beside the polynomial and taken when it lowers the training BIC
+  and the data see its flat zone at least as often as its corner (:func:`fit_input_side`,
+  :func:`dead_visited`: else the form is a bend, a curve the polynomial describes).
 
 A map that is nearly a line (its curvature removes less than :data:`NEAR_LINEAR_SHARE`
 of what it removes beyond its offset, and less than :data:`CURVE_LEFT_SHARE` of what its best line leaves)
@@ -17,18 +26,22 @@ is a linear correction, not a nonlinearity (:func:`linear_static`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+from scipy.special import expit
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls, _refine, _sse, _with, monomials,
-                                  poly_map)
+                                  poly_map, sumsq)
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "map_sides", "InternalMapStage", "max_degree", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
+__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
+           "dead_flat_share", "apply_input",
+           "DEAD", "DEAD_GRID_QUANTILES", "map_sides", "InternalMapStage", "max_degree", "describe_dead", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
            "StaticMapFamily", "FAMILY"]
 
 #: A static map whose curvature (its deviation from its best line) removes less than this share
@@ -48,6 +61,28 @@ CURVE_LEFT_SHARE = 0.25
 #: single-map cases (knee and power input maps, exponential and quadratic sensor curves) gave
 #: 1.40-2.45 with the right side best, and the map-plus-another-effect pairs 1.03-1.14.
 SIDES_SEPARABLE = 1.3
+
+#: The dead-band form's variant (an input-side map: the chain's input slot).
+DEAD = "input:dead"
+#: Starting thresholds of the dead band: these quantiles of the map's input ``|x|`` over the training
+#: samples (a threshold must have samples below it to be seen; the search's bound is the 0.6 quantile).
+#: Set on ``bench/tune_diag/deadzones.py`` seed 1 and ``multi2.py`` seed 21 (thresholds 0.2-2 kV on
+#: commands of 0-9 kV: between the 0.01 and 0.4 quantiles).
+DEAD_GRID_QUANTILES = (0.005, 0.02, 0.05, 0.1, 0.15, 0.2, 0.27, 0.35, 0.45)
+#: The corner's width ``w``: its start and its bounds, times the input's half-range ``u_s`` (a hard
+#: corner, 0.03 kV in ``multi2.py``'s dead zone, is about 0.01 ``u_s``; a corner wider than a quarter of
+#: the range is a curve, the polynomial's).
+DEAD_WIDTH_START = 0.01
+DEAD_WIDTH_BOUNDS = (1e-3, 0.25)
+#: Bounds of the dead band's gain above the threshold (a factor on the nominal one).
+DEAD_GAIN_BOUNDS = (0.1, 10.0)
+#: Function evaluations of the dead band's refinement from the best start (threshold, gain, width).
+DEAD_REFINE_NFEV = 10
+#: The dead band's flat zone: the inputs where its slope is below this share of its gain ``g`` (the
+#: band passes less than a tenth of a change there: below ``d - 2.2 w`` for a corner of width ``w``); its
+#: corner: the slope between this share and ``1 -`` it (within ``d +- 2.2 w``). A conventional 10 %/90 %
+#: split (as a rise time's), not tuned.
+DEAD_FLAT_SLOPE = 0.1
 
 
 @dataclass(frozen=True)
@@ -103,6 +138,67 @@ def input_map(theta, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
     """The generic input map ``x + u_s sum_j theta_j z^j``, ``z = (x - u_c) / u_s`` (clipped to [-1, 1])."""
     z = (x - u_c) / u_s
     return x + u_s * poly_map(theta, z)
+
+
+def dead_map(theta, x: np.ndarray) -> np.ndarray:
+    """The dead band ``g (w sp((x - d) / w) - w sp((-x - d) / w))`` of the input ``x`` (input unit, e.g. kV),
+    ``theta = (d, g, w)``: threshold ``d`` and corner width ``w`` in the input's unit, gain ``g``
+    (dimensionless); ``sp(a) = log(1 + e^a)``. Odd and smooth: 0 at ``x = 0``, about ``g (|x| - d)`` with
+    ``x``'s sign beyond the threshold, about 0 within it."""
+    d, g, w = (float(v) for v in theta[:3])
+    x = np.asarray(x, float)
+    return g * w * (np.logaddexp(0.0, (x - d) / w) - np.logaddexp(0.0, (-x - d) / w))
+
+
+def dead_slope(theta, x: np.ndarray) -> np.ndarray:
+    """The slope ``d dead_map / dx`` (dimensionless) of the dead band ``theta = (d, g, w)`` at the inputs
+    ``x`` (input unit): ``g (s((x - d) / w) + s((-x - d) / w))``, ``s`` the logistic function."""
+    d, g, w = (float(v) for v in theta[:3])
+    x = np.asarray(x, float)
+    return g * (expit((x - d) / w) + expit((-x - d) / w))
+
+
+def dead_zone_shares(theta, x: np.ndarray) -> tuple[float, float]:
+    """The shares (0-1) of the inputs ``x`` (input unit) in the dead band's flat zone (its slope below
+    :data:`DEAD_FLAT_SLOPE` times its gain ``g``) and on its corner (the slope between that and
+    ``(1 - DEAD_FLAT_SLOPE) g``; :func:`dead_slope`); (0, 0) for no samples."""
+    x = np.asarray(x, float)
+    if x.size == 0:
+        return 0.0, 0.0
+    g = abs(float(theta[1]))
+    sl = np.abs(dead_slope(theta, x))
+    flat = sl < DEAD_FLAT_SLOPE * g
+    corner = ~flat & (sl < (1.0 - DEAD_FLAT_SLOPE) * g)
+    return float(np.mean(flat)), float(np.mean(corner))
+
+
+def dead_visited(theta, x: np.ndarray) -> bool:
+    """Whether the inputs ``x`` (input unit) show the dead band ``theta`` as a threshold: some of them lie in
+    its flat zone, and at least as many there as on its corner (:func:`dead_zone_shares`).
+
+    A dead band differs from a smooth convex curve by its flat zone; where the data lie mostly on the
+    corner, the fit describes a bend (with an offset), and its threshold and width are those of a curve,
+    not of a band. The cascaded tanks' pump curve (``bench/tune_diag/datasets.py``: a level growing with
+    the square of the pump voltage, driven 0.4-6.5 V) took the form with its width at the bound, 0 % of
+    its input flat and 87 % on the corner. The rule has no tuned constant (flat against corner, both by
+    :data:`DEAD_FLAT_SLOPE`); on the tuning sets (``deadzones.py`` seed 1, ``multi2.py`` seed 21) the
+    named dead bands had flat shares of 1-35 % against corner shares of 0-12 %, the soft bands whose
+    corner is as wide as the band (``dz_10``, ``dz_14``: flat 0 %) go to the polynomial (the base's names)."""
+    flat, corner = dead_zone_shares(theta, x)
+    return flat > 0.0 and flat >= corner
+
+
+def dead_flat_share(theta, x: np.ndarray) -> float:
+    """The share (0-1) of the inputs ``x`` (input unit) in the dead band's flat zone (:func:`dead_zone_shares`)."""
+    return dead_zone_shares(theta, x)[0]
+
+
+def apply_input(fit: EffectFit, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
+    """The effective input (input unit) of an input-side map ``fit``: the dead band (variant
+    :data:`DEAD`) or the polynomial (variant ``"input"``, normalised by ``u_c``, ``u_s``)."""
+    if fit.variant == DEAD:
+        return dead_map(fit.theta, x)
+    return input_map(fit.theta, x, u_c, u_s)
 
 
 class MapStage:
@@ -178,11 +274,94 @@ def fit_variant(pipe: FitContext, effects: dict[str, EffectFit], variant: str) -
     return fit
 
 
+def _dead_starts(pipe: FitContext, base: dict[str, EffectFit], grid: np.ndarray, w: float) -> EffectFit:
+    """The best of dead bands with thresholds ``grid`` and width ``w`` (input unit), each with its gain by
+    least squares on the training residual (exact with nothing nonlinear between the map and the
+    output, else a start); one pass over the records."""
+    sim = pipe.linear_of(base)
+    ab = np.zeros(grid.size)
+    aa = np.zeros(grid.size)
+    for ri, rec in enumerate(pipe.prep.records):
+        m = rec.train
+        if not m.any():
+            continue
+        st = pipe.stages(base, ri)
+        b = (rec.y - st["y"] + sim.run(st["x_eff"]))[m]
+        for k, d in enumerate(grid):
+            a = sim.run(dead_map((float(d), 1.0, w), st["x_eff"]))[m]
+            ab[k] += float(np.einsum("i,i->", a, b))
+            aa[k] += float(np.einsum("i,i->", a, a))
+    g = np.clip(np.where(aa > 0, ab / np.maximum(aa, 1e-300), 1.0), *DEAD_GAIN_BOUNDS)
+    # ||b - g a||^2 - ||b||^2 at each threshold's gain
+    cost = g * g * aa - 2.0 * g * ab
+    k = int(np.argmin(cost))
+    return EffectFit("static_nonlinearity", DEAD, (float(grid[k]), float(g[k]), float(w)))
+
+
+def _map_inputs(pipe: FitContext, base: dict[str, EffectFit]) -> np.ndarray:
+    """The input-side map's input (input unit) on the training samples of every record, ``base`` before it."""
+    return np.concatenate([pipe.stages(base, ri)["x_map"][rec.train] for ri, rec in enumerate(pipe.prep.records)
+                           if rec.train.any()] or [np.zeros(0)])
+
+
+def fit_dead(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The dead band (:data:`DEAD`) fitted with ``effects`` fixed: thresholds at the quantiles
+    :data:`DEAD_GRID_QUANTILES` of the map's input ``|x|`` (training samples), each with its gain by least
+    squares and the width at :data:`DEAD_WIDTH_START`, the best refined (threshold, gain and width within
+    :meth:`StaticMapFamily.bounds`). None when the input holds fewer than three levels (a step cannot
+    place a corner)."""
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    if getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
+        return None
+    ax = np.abs(_map_inputs(pipe, base))
+    if ax.size < 10:
+        return None
+    grid = np.unique(np.round(np.quantile(ax, DEAD_GRID_QUANTILES), 9))
+    grid = grid[grid > 0]
+    if grid.size == 0:
+        return None
+    f0 = _dead_starts(pipe, base, grid, DEAD_WIDTH_START * pipe.u_s)
+    lo, hi = FAMILY.bounds(pipe, f0)
+    hi = hi.copy()
+    hi[0] = max(float(np.quantile(ax, 0.6)), float(grid[-1]))
+    f0 = EffectFit("static_nonlinearity", DEAD, tuple(map(float, np.clip(f0.theta, lo, hi))))
+    return _refine(pipe, base, f0, lo, hi, max_nfev=DEAD_REFINE_NFEV,
+                   x_scale=np.array([0.02 * pipe.u_s, 0.05, 0.01 * pipe.u_s]))
+
+
+def _bic_prefers(n: int, s_a: float, k_a: int, s_b: float, k_b: int) -> bool:
+    """Whether the fit ``a`` (training sum of squares ``s_a``, ``k_a`` parameters) has a lower BIC than ``b``
+    on ``n`` samples (noise variance unknown): ``n log(s_b / s_a) > (k_a - k_b) log(n)``."""
+    if n <= 1 or s_a <= 0 or s_b <= 0:
+        return False
+    return n * math.log(s_b / s_a) > (k_a - k_b) * math.log(n)
+
+
+def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit:
+    """The input-side map with ``effects`` fixed: the polynomial (:func:`fit_variant`), or the dead band
+    (:func:`fit_dead`) when it lowers the training BIC and is not nearly a line (:func:`linear_static`'s
+    rule: a band the input never crosses is a gain and an offset, the load's and the polynomial's) and the
+    data see its flat zone at least as often as its corner (:func:`dead_visited`: else the data see a bend,
+    a curve the polynomial describes)."""
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    poly = fit_variant(pipe, effects, "input")
+    dead = fit_dead(pipe, effects)
+    if dead is None or not dead_visited(dead.theta, _map_inputs(pipe, base)):
+        return poly
+    r = pipe.residuals(_with(base, dead), "train")
+    s_d = sumsq(r)
+    s_p = _sse(pipe, _with(base, poly))
+    if (_bic_prefers(r.size, s_d, dead.n_params, s_p, poly.n_params)
+            and not _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None, s_full=s_d)):
+        return dead
+    return poly
+
+
 def _fit_static(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best, best_cost = None, np.inf
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     for variant in ("input", "internal"):
-        fit = fit_variant(pipe, effects, variant)
+        fit = fit_input_side(pipe, effects) if variant == "input" else fit_variant(pipe, effects, variant)
         c = _sse(pipe, _with(base, fit))
         if c < best_cost:
             best, best_cost = fit, c
@@ -214,22 +393,29 @@ def linear_static(pipe: FitContext, effects: dict[str, EffectFit]) -> bool:
     if f is None or len(f.theta) <= 1:
         return False
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    if f.variant == DEAD:  # judged against the input side's polynomial offset and line
+        return _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None,
+                              s_full=_sse(pipe, effects))
     return _nearly_linear(pipe, base, f.variant, _static_basis(pipe, base, f.variant), np.asarray(f.theta))
 
 
-def _nearly_linear(pipe: FitContext, base: dict[str, EffectFit], variant: str, basis, th: np.ndarray) -> bool:
+def _nearly_linear(pipe: FitContext, base: dict[str, EffectFit], variant: str, basis, th: np.ndarray | None,
+                   s_full: float | None = None) -> bool:
     """Whether the map ``th`` is nearly a line: beyond its offset (the best constant map), its
     curvature (the part beyond the best line) removes less than :data:`NEAR_LINEAR_SHARE` of what
     the whole map removes, and less than :data:`CURVE_LEFT_SHARE` of what the best line leaves (sums of
-    squares of the training residual); the rest is a slope, a linear correction."""
+    squares of the training residual); the rest is a slope, a linear correction. ``th`` None: another
+    form of the map (the dead band) whose training sum of squares is ``s_full``, against the polynomial
+    ``variant``'s offset and line."""
     def sse(t: np.ndarray) -> float:
         return _sse(pipe, _with(base, EffectFit("static_nonlinearity", variant, tuple(map(float, t)))))
 
-    s_full = sse(th)
+    if s_full is None:
+        s_full = sse(th)
     beyond_offset = sse(_poly_ls(pipe, base, basis, degrees=(0,))) - s_full
     if beyond_offset <= 0:
         return False
-    s_line = s_full if th.size <= 2 else sse(_poly_ls(pipe, base, basis, degrees=(1,)))
+    s_line = s_full if th is not None and th.size <= 2 else sse(_poly_ls(pipe, base, basis, degrees=(1,)))
     curvature = s_line - s_full
     # a large gain change (a power law far from its reference voltage) makes any curvature a small share of
     # what the map removes, yet the curvature may remove most of what the line leaves: a nonlinearity
@@ -246,13 +432,33 @@ class StaticMapFamily(EffectFamily):
     truth_class = StaticNonlinearity
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
-        """``("z^0", "z^1", ...)``: the polynomial's coefficients."""
+        """``("z^0", "z^1", ...)``: the polynomial's coefficients; the dead band's ``("threshold", "gain",
+        "width")`` (input unit, factor, input unit)."""
+        if fit.variant == DEAD:
+            return ("threshold", "gain", "width")
         return tuple(f"z^{j}" for j in range(len(fit.theta)))
 
+    def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """The polynomials are free; the dead band's threshold lies in ``[0, u_c + u_s]`` (input unit), its
+        gain in :data:`DEAD_GAIN_BOUNDS`, its width in :data:`DEAD_WIDTH_BOUNDS` times ``u_s``."""
+        if fit.variant == DEAD:
+            return (np.array([0.0, DEAD_GAIN_BOUNDS[0], DEAD_WIDTH_BOUNDS[0] * ctx.u_s]),
+                    np.array([max(ctx.u_c + ctx.u_s, 1e-12), DEAD_GAIN_BOUNDS[1], DEAD_WIDTH_BOUNDS[1] * ctx.u_s]))
+        return super().bounds(ctx, fit)
+
+    def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`bounds`, except the dead band's narrowest width: a hard corner is an ordinary value."""
+        lo, hi = self.bounds(ctx, fit)
+        if fit.variant == DEAD:
+            lo = lo.copy()
+            lo[2] = -np.inf
+        return lo, hi
+
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> MapStage | InternalMapStage:
-        """The input map (memoryless), or the internal map through the linear model ``scales.num/den``."""
-        if fit.variant == "input":
-            return MapStage(lambda x: input_map(fit.theta, x, scales.u_c, scales.u_s))
+        """The input map (memoryless: the polynomial or the dead band), or the internal map through the
+        linear model ``scales.num/den``."""
+        if fit.variant.split(":")[0] == "input":
+            return MapStage(lambda x: apply_input(fit, x, scales.u_c, scales.u_s))
         return InternalMapStage(fit.theta, getattr(scales, "num"), getattr(scales, "den"), scales.y_c, scales.y_s,
                                 dt_s)
 
@@ -262,12 +468,17 @@ class StaticMapFamily(EffectFamily):
         return MapStage(effect.apply)
 
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-        """Input and internal polynomial maps by least squares (degree by cross-validation), the better kept."""
+        """Input and internal polynomial maps by least squares (degree by cross-validation), the input side's
+        dead band in place of its polynomial when the BIC says so (:func:`fit_input_side`), the better of
+        the two sides kept."""
         return _fit_static(ctx, effects)
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
-        """Coefficients, normalisation, the curve's deviation on 9 points and the offset in output units."""
+        """Coefficients, normalisation, the curve's deviation on 9 points and the offset in output units;
+        for the dead band its threshold, gain and width with units."""
+        if fit.variant == DEAD:
+            return describe_dead(ctx, fit, units, effects)
         out = describe_poly(ctx, fit, units)
         g0 = ctx.linear_of(effects or {}).dc_gain if fit.variant == "input" else 1.0
         out["output_offset_at_centre"] = float(g0 * (ctx.u_s if fit.variant == "input" else ctx.y_s) * fit.theta[0])
@@ -288,7 +499,7 @@ def map_sides(ctx: FitContext, effects: dict[str, EffectFit]) -> dict:
 
     base = {k: v for k, v in effects.items() if k not in ("static_nonlinearity", "sensor_nonlinearity")}
     s0 = _sse(ctx, base)
-    cands = {v: fit_variant(ctx, base, v) for v in ("input", "internal")}
+    cands = {"input": fit_input_side(ctx, base), "internal": fit_variant(ctx, base, "internal")}
     sens = family("sensor_nonlinearity").fit(ctx, base)
     if sens is not None:
         cands["sensor"] = sens
@@ -297,6 +508,32 @@ def map_sides(ctx: FitContext, effects: dict[str, EffectFit]) -> dict:
     runner = share[order[1]] / max(share[order[0]], 1e-300) if len(order) > 1 else float("inf")
     return {"remaining_share": share, "best": order[0], "runner_up": order[1] if len(order) > 1 else None,
             "runner_up_over_best": runner, "separable": runner > SIDES_SEPARABLE}
+
+
+def describe_dead(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effects: dict[str, EffectFit]) -> dict:
+    """A dead band's description: threshold and width (input unit), gain, the shares of the training input
+    samples within the threshold and in its flat zone (:func:`dead_flat_share`), the effective input's deviation on 9 points and the output offset at
+    the input's centre (output unit)."""
+    ui, uo = units
+    d, g, w = fit.theta[:3]
+    c, s = ctx.u_c, ctx.u_s
+    xs = np.linspace(c - s, c + s, 9)
+    out: dict = {"variant": fit.variant, "threshold": float(d), "threshold_unit": ui, "gain": float(g),
+                 "width": float(w), "width_unit": ui,
+                 "form": "g*(w*sp((x - d)/w) - w*sp((-x - d)/w)), sp(a) = log(1 + exp(a)): nothing passes "
+                         "below the threshold d, the rest with the gain g, the corner rounded over about w",
+                 "curve": {"at": xs.tolist(), "deviation": (dead_map(fit.theta, xs) - xs).tolist()}}
+    try:
+        x = np.concatenate([r.u[r.train] for r in ctx.prep.records if r.train.any()])
+        out["share_within_threshold"] = float(np.mean(np.abs(x) < d)) if x.size else None
+        out["share_flat"] = dead_flat_share(fit.theta, x) if x.size else None
+    except (AttributeError, ValueError):
+        out["share_within_threshold"] = None
+        out["share_flat"] = None
+    g0 = ctx.linear_of(effects or {}).dc_gain
+    out["output_offset_at_centre"] = float(g0 * (dead_map(fit.theta, np.array([c]))[0] - c))
+    out["output_offset_unit"] = uo
+    return out
 
 
 def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
