@@ -310,6 +310,19 @@ class IdentResult:
         return [] if self.check is None else list(self.check.reasons)
 
     @property
+    def sample_read(self) -> str:
+        """How the fit read the output between interval starts (the model JSON's ``sample_read``):
+        :data:`SAMPLE_READ_EXACT` when it ran on block means (more than one raw sample per working
+        sample at ``analysis_rate_hz``, Hz) under :data:`hasel.ident.timefit.READ` ``"blocks"``, else
+        :data:`SAMPLE_READ` (linear interpolation)."""
+        from hasel.ident import timefit
+
+        block = int(round(self.rate_hz / self.analysis_rate_hz)) if self.analysis_rate_hz else 1
+        if timefit.READ == "exact" or (timefit.READ == "blocks" and block > 1):
+            return SAMPLE_READ_EXACT
+        return SAMPLE_READ
+
+    @property
     def model(self):
         """The fitted :class:`~hasel.ident.tffit.TFModel`."""
         return self.fit.model
@@ -386,7 +399,7 @@ class IdentResult:
             "timing_offset_s": float(self.timing_offset_s),
             # the fit's simulation read the output between interval starts by linear interpolation
             # (hasel.ident.timefit): a simulator reading it exactly would see a small linear mismatch
-            "sample_read": SAMPLE_READ,
+            "sample_read": self.sample_read,
             "zeros": pairs(m.zeros),
             "poles": pairs(m.poles),
             "gain": float(m.gain),
@@ -679,10 +692,14 @@ def _steady_means(u: np.ndarray, y: np.ndarray, rate: float) -> tuple[np.ndarray
 
 #: Relative margin within which two held-out errors tie (order selection, timing offset).
 _TIE = 0.02
-#: How the fits' simulation reads the output between interval starts (the model JSON's ``sample_read``):
-#: linear interpolation (:func:`hasel.ident.timefit.simulate_zoh`); ``hasel diagnose`` simulates such a
-#: model the same way.
+#: The model JSON's ``sample_read`` of a model fitted with linear interpolation between interval starts
+#: (:func:`hasel.ident.timefit.simulate_zoh`, ``read="interpolated"``; raw samples, no block means): ``hasel
+#: diagnose`` simulates such a model the same way.
 SAMPLE_READ = "interpolated"
+#: The model JSON's ``sample_read`` of a model fitted on block means read exactly for the held input
+#: (:data:`hasel.ident.timefit.READ`, ``"blocks"``, with more than one raw sample per working sample):
+#: ``hasel diagnose`` reads such a model exactly (:class:`hasel.lti.ZohAt`).
+SAMPLE_READ_EXACT = "exact"
 
 
 def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: Any, opts: IdentOptions,
@@ -1291,16 +1308,20 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     f_chk = _check_grid(model, band)
     resp_spread = None
     if f_chk.size:
-        # when the fit kept a timing offset, it is a parameter of the covariance (bounded to +-max_shift): what
-        # the data cannot tell from the phase of G is not pinned; without one (the held-out data chose none, or
-        # it is off) the covariance is conditional on that choice (with it always, right 200 Hz paper-chirp and
-        # 10 kHz campaign models read +-5-6 deg at 11-13 Hz)
+        # the timing offset is a parameter of the covariance (bounded to +-max_shift) whether the fit kept one or
+        # not: what the data cannot tell from the phase of G is not pinned, and a choice of no offset is itself
+        # uncertain at the band's top (a first-order hold's half sample taken into G: 11 deg at 15 Hz on a
+        # 200 Hz voltage-step log, +-3.9 deg conditional on no offset, +-9.9 deg with it free). Only when the
+        # offset is off (max_timing_samples 0) is the covariance conditional on none. (Before session 14 it was
+        # conditional on the choice: with the interpolated read of block means, the 10 kHz campaign's right model
+        # read +-8.5 deg at 12.4 Hz with the offset free; with the exact read of block means (timefit.READ) that
+        # test passes: bench/tune_ident/RESULT_h-ident4.md)
         def spread_of(fit: Any, shift_free: bool) -> Any:
             return response_uncertainty(fit, ud_all, yd_all, oe_rate, pieces, f_chk, hold=opts.input_hold,
                                         block=oe_block, max_shift=max_shift if shift_free else 0.0,
                                         drift_s=opts.drift_knot_s)
 
-        sd = spread_of(oe, oe.shift != 0.0)
+        sd = spread_of(oe, max_shift > 0)
         # each tied rival with its own response standard errors (check 7 judges the difference against both)
         # and its own timing offset (the rivals were fitted before the offset was chosen for the chosen order)
         rivals = [(c[0], c[1], c[3].model, float(c[4]), spread_of(c[3], c[3].shift != 0.0),
