@@ -93,3 +93,21 @@ def test_the_model_json_says_which_read_it_was_fitted_with():
         assert r.usable
         cmp_ = r.paper_comparison()
         assert cmp_["max_db"] <= 1.0 and cmp_["max_deg"] <= 5.0
+
+
+def test_diagnose_reads_a_model_fitted_on_exact_block_means_exactly():
+    """A given model JSON with ``sample_read: exact`` is simulated exactly by hasel diagnose (as one without the key);
+    ``interpolated`` keeps the interpolating read."""
+    from hasel.diagnose.core import DiagnoseOptions, _model_stage, _nominal_model
+    from hasel.diagnose.prep import LinearSim, prepare
+
+    rng = np.random.default_rng(7)
+    fs = 2000.0
+    t = np.arange(16000) / fs
+    u = 4.0 + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t)) + 0.5 * np.sin(2 * np.pi * 5.0 * t)
+    y = LinearSim(_NUM, _DEN, fs, 0.0).run(u) + 0.002 * rng.standard_normal(t.size)
+    for read, exact in ((SAMPLE_READ_EXACT, True), (SAMPLE_READ, False)):
+        prep = prepare(t, u, y, target_rate_hz=500.0)
+        n0, d0, src = _nominal_model({"num": list(_NUM), "den": list(_DEN), "sample_read": read})
+        _model_stage(prep, n0, d0, src, DiagnoseOptions(), lambda m: None)
+        assert prep.exact_offset is exact

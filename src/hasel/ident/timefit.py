@@ -56,10 +56,12 @@ HOLDS = ("zoh", "centred")
 #: its raw samples' exact outputs) and by linear interpolation between interval starts for raw samples;
 #: ``"exact"`` everywhere; ``"interpolated"`` everywhere (the read of every fit before session 14).
 #: Set on the 115 identification tuning logs (bench/tune_ident/RESULT_h-ident4.md): the exact read of block
-#: means moved the 10 kHz and most 1 kHz models closer to P(s) (the interpolated one droops 3 x more than a
-#: block mean at the band's top: -0.16 against -0.05 dB at 15 Hz of a 250 Hz working rate); the exact read of
-#: raw 200 Hz samples made 7 right models wrong (2/3 models with a fractional offset 2 deg further off at
-#: 15 Hz: the paper's plant's notch at 19.45 Hz, which the interpolation's droop had happened to follow).
+#: means moved the 10 kHz and most 1 kHz models closer to P(s) (read at the block's mean time, the interpolation
+#: droops -0.16 dB at 15 Hz of a 250 Hz working rate, the block mean itself -0.05 dB: the fitted G made up the
+#: difference near the band's top); the exact read of raw 200 Hz samples too turned 7 good 200 Hz models wrong at
+#: exit 0 (2/3 models with a fractional offset 2 deg further off at 15 Hz, up to 21 deg where a higher order
+#: then took the lead into G: the interpolation's droop had happened to follow the paper's plant's approach to
+#: its notch at 19.45 Hz).
 READ = "blocks"
 #: The ``read`` values of :func:`simulate_zoh`.
 READS = ("blocks", "exact", "interpolated")
