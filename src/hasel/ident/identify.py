@@ -55,8 +55,8 @@ from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_f
 from hasel.ident.staticmap import StaticMap, fit_static_map
 from hasel.ident.checks import SPREAD_FLOOR, ModelCheck, check_model, inband_errors
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
-from hasel.ident.timefit import (arx_start, interleaved, oe_fit, response_uncertainty, shift_standard_error,
-                                 simulate_zoh)
+from hasel.ident.timefit import (EXACT_BLOCK_MIN, arx_start, interleaved, oe_fit, response_uncertainty,
+                                 shift_standard_error, simulate_zoh)
 from hasel.ident.validation import compare_fit
 from hasel.validate import excited
 from hasel.signals import uniform_grid
@@ -312,13 +312,14 @@ class IdentResult:
     @property
     def sample_read(self) -> str:
         """How the fit read the output between interval starts (the model JSON's ``sample_read``):
-        :data:`SAMPLE_READ_EXACT` when it ran on block means (more than one raw sample per working
-        sample at ``analysis_rate_hz``, Hz) under :data:`hasel.ident.timefit.READ` ``"blocks"``, else
+        :data:`SAMPLE_READ_EXACT` when it ran on block means of at least
+        :data:`hasel.ident.timefit.EXACT_BLOCK_MIN` raw samples per working sample (at
+        ``analysis_rate_hz``, Hz) under :data:`hasel.ident.timefit.READ` ``"blocks"``, else
         :data:`SAMPLE_READ` (linear interpolation)."""
         from hasel.ident import timefit
 
         block = int(round(self.rate_hz / self.analysis_rate_hz)) if self.analysis_rate_hz else 1
-        if timefit.READ == "exact" or (timefit.READ == "blocks" and block > 1):
+        if timefit.READ == "exact" or (timefit.READ == "blocks" and block >= timefit.EXACT_BLOCK_MIN):
             return SAMPLE_READ_EXACT
         return SAMPLE_READ
 
@@ -787,13 +788,13 @@ _SOFT_INBAND = 0.1
 _PAIRS_MARGIN = 0.1
 
 
-#: Largest block (raw samples per working sample of the output-error fit) on which a sampling convention is
-#: looked for in a lower order with a timing offset (:func:`_lower_order_with_offset`) and the response covariance
-#: has the timing offset free when the fit kept none. Set on the 115 identification tuning logs with the exact read
-#: of block means (bench/tune_ident/RESULT_h-ident4.md): on 1 kHz and 10 kHz logs (blocks 4-40) the rule picked a
-#: 4/5 with a 0.37-sample offset over the right 5/6 of a clean 1 kHz simulator log (5.4 deg off, test_ident_cli)
-#: and the free covariance refused the right 5/6 (+-12 deg); without them at 500 Hz (blocks of 2) two right models
-#: went 5.6-6.3 deg wrong (a 500 Hz PRBS and random steps of varied.py --widened --seed 1).
+#: Largest block (raw samples per working sample of the output-error fit) on which the response covariance has
+#: the timing offset free when the fit kept none (raw samples or pairs). Set on the 115 identification tuning
+#: logs and the ident tests (bench/tune_ident/RESULT_h-ident4.md): on a clean 1 kHz simulator log (blocks of 4,
+#: test_ident_cli) the free covariance refused the right 5/6 model (+-12 deg at 12.8 Hz). A lower order with a
+#: timing offset (:func:`_lower_order_with_offset`) is looked for only on blocks read by interpolation (below
+#: :data:`hasel.ident.timefit.EXACT_BLOCK_MIN`), where it was set: with the exact read of blocks of 4 it picked
+#: a 4/5 with a 0.37-sample offset over that log's right 5/6 (5.4 deg off at exit 0).
 _RAW_BLOCK_MAX = 2
 
 
@@ -1309,7 +1310,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     if max_shift > 0 and hold > 0 and math.isfinite(oe.nrmse_heldout):
         lower, lower_rival = (_lower_order_with_offset(candidates, (nz, n_p), best, ud_all, yd_all, oe_rate, pieces,
                                                        opts, oe_block, max_shift, notes)
-                              if opts.order is None and oe_block <= _RAW_BLOCK_MAX else (None, None))
+                              if opts.order is None and oe_block < EXACT_BLOCK_MIN else (None, None))
         if lower is not None:
             nz, n_p, start, oe = lower
         else:

@@ -52,8 +52,9 @@ __all__ = ["simulate_zoh", "modal_basis", "Pieces", "OEResult", "oe_fit", "arx_s
 #: Accepted sampling conventions of the input.
 HOLDS = ("zoh", "centred")
 #: How :func:`simulate_zoh` reads the output between interval starts by default: ``"blocks"``, exactly for
-#: the held input (:func:`_sim_modal_at`) where the data are block means (``block > 1``: each block's mean of
-#: its raw samples' exact outputs) and by linear interpolation between interval starts for raw samples;
+#: the held input (:func:`_sim_modal_at`) where the data are means of blocks of at least :data:`EXACT_BLOCK_MIN`
+#: raw samples (each block's mean of its raw samples' exact outputs) and by linear interpolation between interval
+#: starts otherwise;
 #: ``"exact"`` everywhere; ``"interpolated"`` everywhere (the read of every fit before session 14).
 #: Set on the 115 identification tuning logs (bench/tune_ident/RESULT_h-ident4.md): the exact read of block
 #: means moved the 10 kHz and most 1 kHz models closer to P(s) (read at the block's mean time, the interpolation
@@ -65,6 +66,12 @@ HOLDS = ("zoh", "centred")
 READ = "blocks"
 #: The ``read`` values of :func:`simulate_zoh`.
 READS = ("blocks", "exact", "interpolated")
+#: Smallest block (raw samples per working sample) read exactly under ``READ = "blocks"``. Set on the 115
+#: identification tuning logs (bench/tune_ident/RESULT_h-ident4.md): read exactly, the 10 kHz logs (blocks of 40)
+#: all moved closer to P(s) or stayed (3 wrong models right, one wrong at exit 0 right); the 1 kHz logs (blocks of 4)
+#: were mixed (two right chirp models lost, a plain 1 kHz paper chirp of src/tests/designs.py, seed 3, went from
+#: 3.4 deg to 5.4 deg at exit 0), the 500 Hz ones (blocks of 2) gave one more wrong model at exit 0.
+EXACT_BLOCK_MIN = 8
 #: Bound of the output-error parameters (logs of scaled polynomial coefficients): e^60 is far beyond any
 #: physical pole ratio, and keeps products of them finite
 _THETA_MAX = 60.0
@@ -125,7 +132,7 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
         the held input (``"exact"``: each block's mean of the raw samples' exact outputs), by
         linear interpolation between interval starts at the block's mean time
         (``"interpolated"``, the read of models fitted before session 14), or exactly only
-        when ``block > 1`` (``"blocks"``).
+        when ``block >= EXACT_BLOCK_MIN`` (``"blocks"``).
 
     Returns
     -------
@@ -145,7 +152,7 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
     rd = read if read is not None else READ
     if rd not in READS:
         raise BadInputError(f"read must be one of {', '.join(READS)}, got {rd!r}")
-    if (rd == "exact" and (block > 1 or extra != 0.0)) or (rd == "blocks" and block > 1):
+    if (rd == "exact" and (block > 1 or extra != 0.0)) or (rd == "blocks" and block >= EXACT_BLOCK_MIN):
         y = _sim_modal_at(num, den, x, dt, np.arange(block) / block + extra)
         if y is not None:
             return y
