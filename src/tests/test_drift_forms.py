@@ -29,18 +29,23 @@ def _lag(x: np.ndarray, tau: float) -> np.ndarray:
     return signal.lfilter([1 - a], [1, -a], x, zi=np.array([a * x[0]]))[0]
 
 
+def _levels(rng: np.random.Generator, n: int, rate: float) -> np.ndarray:
+    """``n`` samples at ``rate`` Hz of random levels 0.5-7.5 kV, each held 0.2-3 s (draws from ``rng``)."""
+    u = np.empty(n)
+    k = 0
+    while k < n:
+        m = int(rng.uniform(0.2, 3.0) * rate)
+        u[k:k + m] = rng.uniform(0.5, 7.5)
+        k += m
+    return u
+
+
 def _log(drift: bool, seed: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random levels 0.5-7.5 kV held 0.2-3 s through P(s) at RATE; with ``drift`` the voltage screened by
     charge trapped at two depths (``v - 0.12 lag(v, 2 s) - 0.10 lag(v, 15 s)``); 5 um white noise."""
     rng = np.random.default_rng(seed)
     n = int(DUR * RATE)
-    u = np.empty(n)
-    k = 0
-    while k < n:
-        m = int(rng.uniform(0.2, 3.0) * RATE)
-        u[k:k + m] = rng.uniform(0.5, 7.5)
-        k += m
-    u = _lag(u, 2e-3)
+    u = _lag(_levels(rng, n, RATE), 2e-3)
     v = u - 0.12 * _lag(u, TAU_FAST) - 0.10 * _lag(u, TAU_SLOW) if drift else u
     num, den = paper.plant_tf()
     b, a, _ = signal.cont2discrete((num, den), 1.0 / RATE, method="zoh")
@@ -116,12 +121,7 @@ def test_history_beats_time_on_a_trap_not_on_a_warm_up():
     rng = np.random.default_rng(5)
     n = int(dur * rate)
     t = np.arange(n) / rate
-    u = np.empty(n)
-    k = 0
-    while k < n:
-        m = int(rng.uniform(0.2, 3.0) * rate)
-        u[k:k + m] = rng.uniform(0.5, 7.5)
-        k += m
+    u = _levels(rng, n, rate)
     u[:int(3 * rate)] = -1.0
     pipe = SimpleNamespace(prep=SimpleNamespace(dt_s=1.0 / rate), u_s=4.0)
     train = np.ones(n, bool)
