@@ -24,6 +24,7 @@ from scipy import signal
 from hasel import paper
 from hasel.diagnose import diagnose
 from hasel.effects.base import EffectFit, run_chunked
+from hasel.effects.fitkit import bic_prefers
 from hasel.effects.registry import family
 from hasel.effects.static_map import DEAD, dead_map, dead_visited, dead_zone_shares
 
@@ -147,8 +148,8 @@ def test_a_bend_without_a_flat_zone_in_reach_is_the_polynomials():
     poly = sm.fit_variant(pipe, {}, "input")
     x = sm._map_inputs(pipe, {})
     # the form fits the bend better than the polynomial, by the BIC too ...
-    assert sm._bic_prefers(x.size, _sse(pipe, _with({}, dead)), dead.n_params, _sse(pipe, _with({}, poly)),
-                           poly.n_params)
+    assert bic_prefers(x.size, _sse(pipe, _with({}, poly)), _sse(pipe, _with({}, dead)),
+                       dead.n_params - poly.n_params)
     # ... but none of the input is flat and over a third lies on the corner: a curve, the polynomial's
     flat, corner = dead_zone_shares(dead.theta, x)
     assert flat == 0.0 and corner > 0.3

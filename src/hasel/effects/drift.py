@@ -39,7 +39,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _ls, _sse, _train_smooth, _with, sumsq
+from hasel.effects.fitkit import _ls, _sse, _train_smooth, _with, bic_prefers, sumsq
 from hasel.validate import in_range, positive
 
 __all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
@@ -249,11 +249,6 @@ def pipe_output(pipe, x: np.ndarray, y: np.ndarray, fit: EffectFit) -> np.ndarra
     return y + pipe.y_s * (of * qf + os_ * qs)
 
 
-def _bic_better(n: int, s0: float, s1: float, extra: int) -> bool:
-    """Whether ``extra`` more parameters lower the BIC (noise variance unknown): n log(s0/s1) > extra log n."""
-    return n > 1 and s1 > 0 and s0 > 0 and n * math.log(s0 / s1) > extra * math.log(n)
-
-
 def _box_on(m: np.ndarray, n: int):
     """A function: moving averages over ``n`` samples of training samples only (as ``fitkit._train_smooth``),
     of arrays holding the training samples (``m``) only, returned on those samples; columns at once."""
@@ -419,7 +414,7 @@ def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectF
     n = pipe.residuals(effects, "train").size
     s1 = _sse(pipe, _with(effects, one)) if one is not None else _sse(pipe, effects)
     s2 = _sse(pipe, _with(effects, two))
-    return two if _bic_better(n, s1, s2, len(two.theta) - (len(one.theta) if one is not None else 0)) else one
+    return two if bic_prefers(n, s1, s2, len(two.theta) - (len(one.theta) if one is not None else 0)) else one
 
 
 def _fit_drift(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:

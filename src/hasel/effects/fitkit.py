@@ -101,6 +101,13 @@ def _refine(pipe: Pipeline, effects: dict[str, EffectFit], fit: EffectFit, lo, h
     return cand if 2.0 * res.cost <= _sse(pipe, _with(effects, fit)) else fit
 
 
+def bic_prefers(n: int, s_simple: float, s_rich: float, extra: int) -> bool:
+    """Whether a fit with ``extra`` more parameters (training sum of squares ``s_rich``) has a lower BIC than
+    the simpler one (``s_simple``) on ``n`` samples, noise variance unknown: ``n log(s_simple / s_rich) >
+    extra log n``; False when either sum is not positive or ``n <= 1``."""
+    return n > 1 and s_rich > 0 and s_simple > 0 and n * math.log(s_simple / s_rich) > extra * math.log(n)
+
+
 def _train_smooth(x: np.ndarray, m: np.ndarray, n: int) -> np.ndarray:
     """Moving average of ``x`` over ``n`` samples using training samples (``m``) only."""
     def box(v: np.ndarray) -> np.ndarray:

@@ -26,7 +26,6 @@ is a linear correction, not a nonlinearity (:func:`linear_static`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -34,8 +33,8 @@ import numpy as np
 from scipy.special import expit
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls, _refine, _sse, _with, monomials,
-                                  poly_map, sumsq)
+from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls, _refine, _sse, _with, bic_prefers,
+                                  monomials, poly_map, sumsq)
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
@@ -329,14 +328,6 @@ def fit_dead(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | Non
                    x_scale=np.array([0.02 * pipe.u_s, 0.05, 0.01 * pipe.u_s]))
 
 
-def _bic_prefers(n: int, s_a: float, k_a: int, s_b: float, k_b: int) -> bool:
-    """Whether the fit ``a`` (training sum of squares ``s_a``, ``k_a`` parameters) has a lower BIC than ``b``
-    on ``n`` samples (noise variance unknown): ``n log(s_b / s_a) > (k_a - k_b) log(n)``."""
-    if n <= 1 or s_a <= 0 or s_b <= 0:
-        return False
-    return n * math.log(s_b / s_a) > (k_a - k_b) * math.log(n)
-
-
 def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit:
     """The input-side map with ``effects`` fixed: the polynomial (:func:`fit_variant`), or the dead band
     (:func:`fit_dead`) when it lowers the training BIC and is not nearly a line (:func:`linear_static`'s
@@ -351,7 +342,7 @@ def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit
     r = pipe.residuals(_with(base, dead), "train")
     s_d = sumsq(r)
     s_p = _sse(pipe, _with(base, poly))
-    if (_bic_prefers(r.size, s_d, dead.n_params, s_p, poly.n_params)
+    if (bic_prefers(r.size, s_p, s_d, dead.n_params - poly.n_params)
             and not _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None, s_full=s_d)):
         return dead
     return poly
