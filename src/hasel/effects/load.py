@@ -33,7 +33,7 @@ from typing import ClassVar
 import numpy as np
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _refine, _sse, _with, sumsq
+from hasel.effects.fitkit import _refine, _sse, _with, bic_prefers, sumsq
 from hasel.effects.evidence import resonance_hz
 from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
@@ -267,7 +267,7 @@ def _fit_damp(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     damp = _refine(pipe, effects, f0, lo, hi, max_nfev=30, x_scale=np.array([0.1, 0.1, 0.2]))
     n = pipe.residuals(_with(effects, fit), "train").size
     s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, damp))
-    if n > 1 and s1 > 0 and n * math.log(s0 / s1) > math.log(n) and _magnitude_shown(pipe, effects, damp):
+    if bic_prefers(n, s0, s1, 1) and _magnitude_shown(pipe, effects, damp):
         return damp
     return fit
 
@@ -303,7 +303,7 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         sag = _refine(pipe, effects, sag, lo, hi, max_nfev=15,
                       x_scale=np.array([0.1] * len(fit.theta) + [0.1 * pipe.y_s]))
         s0, s1 = sumsq(r), _sse(pipe, _with(effects, sag))
-        if abs(sag.theta[0]) >= LOAD_SAG_MIN_MU and s1 > 0 and r.size * math.log(s0 / s1) > math.log(r.size):
+        if abs(sag.theta[0]) >= LOAD_SAG_MIN_MU and bic_prefers(r.size, s0, s1, 1):
             return sag
     return fit
 
