@@ -12,7 +12,6 @@ import json
 import math
 from pathlib import Path
 
-import numpy as np
 
 from hasel.compare import (DEFAULTS, ClosedLoopLog, load_closed_loop, measured_steps, nrmse, on_log_times,
                            reference_steps)

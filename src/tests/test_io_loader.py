@@ -1,7 +1,6 @@
 """Loading signals and markers from MCAP logs (ours and rosbag2's), and load_io on MCAP."""
 from __future__ import annotations
 
-from pathlib import Path
 
 from realdata import datasets_dir
 
