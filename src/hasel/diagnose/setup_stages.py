@@ -109,8 +109,10 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
             if np.any(np.real(np.roots(den)) >= 0):
                 raise ValueError("unstable model")
             d = _model_delay(mj)
-            cands.append((_train_fit(prep, num, den, d), num, den,
-                          {"source": "hasel.ident", "delay_s": d, "sample_read": SAMPLE_READ,
+            # simulated the way it was fitted: interpolated, or exactly (block means, hasel.ident.timefit.READ)
+            read = mj.get("sample_read", SAMPLE_READ)
+            cands.append((_train_fit(replace(prep, exact_offset=read != SAMPLE_READ), num, den, d), num, den,
+                          {"source": "hasel.ident", "delay_s": d, "sample_read": read,
                            "details": {"order": int(den.size - 1),
                                        **{k: mj[k] for k in ("fit", "frequency_band_hz", "static_gain") if k in mj}}}))
         except Exception as err:  # noqa: BLE001 - any failure falls back to the internal fit
@@ -292,6 +294,8 @@ def _model_stage(prep: Prepared, num, den, source: dict, opts: DiagnoseOptions, 
             say(f"the output piles up on {', '.join(f'{v:.4g}' for v, _ in clips.values())} "
                 f"({int(at.sum())} samples, a clip): identifying without them")
         num, den, source = _identify(prep_id, opts, say)
+        # hasel.ident's model fitted on block means read exactly is simulated exactly too
+        prep.exact_offset = source.get("sample_read", SAMPLE_READ) != SAMPLE_READ
     else:
         g = _gain_stage(prep, num, den, float(source.get("delay_s", 0.0) or 0.0), say)
         source = {**source, "nominal_scale": {k: g[k] for k in ("scale", "checked", "band_hz", "band_share")}}

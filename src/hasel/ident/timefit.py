@@ -45,12 +45,33 @@ from scipy import signal
 
 from hasel.errors import BadInputError
 from hasel.ident.tffit import TFModel
-from hasel.lti import zoh_sos
+from hasel.lti import ZohAt, zoh_sos
 
 __all__ = ["simulate_zoh", "modal_basis", "Pieces", "OEResult", "oe_fit", "arx_start", "arx_lstsq", "HOLDS"]
 
 #: Accepted sampling conventions of the input.
 HOLDS = ("zoh", "centred")
+#: How :func:`simulate_zoh` reads the output between interval starts by default: ``"blocks"``, exactly for
+#: the held input (:func:`_sim_modal_at`) where the data are means of blocks of at least :data:`EXACT_BLOCK_MIN`
+#: raw samples (each block's mean of its raw samples' exact outputs) and by linear interpolation between interval
+#: starts otherwise;
+#: ``"exact"`` everywhere; ``"interpolated"`` everywhere (the read of every fit before session 14).
+#: Set on the 115 identification tuning logs (bench/tune_ident/RESULT_h-ident4.md): the exact read of block
+#: means moved the 10 kHz and most 1 kHz models closer to P(s) (read at the block's mean time, the interpolation
+#: droops -0.16 dB at 15 Hz of a 250 Hz working rate, the block mean itself -0.05 dB: the fitted G made up the
+#: difference near the band's top); the exact read of raw 200 Hz samples too turned 7 good 200 Hz models wrong at
+#: exit 0 (2/3 models with a fractional offset 2 deg further off at 15 Hz, up to 21 deg where a higher order
+#: then took the lead into G: the interpolation's droop had happened to follow the paper's plant's approach to
+#: its notch at 19.45 Hz).
+READ = "blocks"
+#: The ``read`` values of :func:`simulate_zoh`.
+READS = ("blocks", "exact", "interpolated")
+#: Smallest block (raw samples per working sample) read exactly under ``READ = "blocks"``. Set on the 115
+#: identification tuning logs (bench/tune_ident/RESULT_h-ident4.md): read exactly, the 10 kHz logs (blocks of 40)
+#: all moved closer to P(s) or stayed (3 wrong models right, one wrong at exit 0 right); the 1 kHz logs (blocks of 4)
+#: were mixed (two right chirp models lost, a plain 1 kHz paper chirp of src/tests/designs.py, seed 3, went from
+#: 3.4 deg to 5.4 deg at exit 0), the 500 Hz ones (blocks of 2) gave one more wrong model at exit 0.
+EXACT_BLOCK_MIN = 8
 #: Bound of the output-error parameters (logs of scaled polynomial coefficients): e^60 is far beyond any
 #: physical pole ratio, and keeps products of them finite
 _THETA_MAX = 60.0
@@ -85,7 +106,7 @@ def _mode_section(p: complex, r: complex, dt: float, real: bool) -> np.ndarray:
 
 
 def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "zoh", block: int = 1,
-                 shift: float = 0.0) -> np.ndarray:
+                 shift: float = 0.0, read: str | None = None) -> np.ndarray:
     """Output of ``model`` for the input ``u`` (deviation from rest), sampled at ``rate_hz``.
 
     Parameters
@@ -106,6 +127,12 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
         of ``u``: ``y_data[k] = y_sim(k + shift)`` (linear interpolation). Positive
         when the data's output is ahead of the model (a first-order hold of the
         input), negative when it lags (a skew of the output channel).
+    read : {"blocks", "exact", "interpolated"}, optional
+        How the output is read between interval starts (default :data:`READ`): exactly for
+        the held input (``"exact"``: each block's mean of the raw samples' exact outputs), by
+        linear interpolation between interval starts at the block's mean time
+        (``"interpolated"``, the read of models fitted before session 14), or exactly only
+        when ``block >= EXACT_BLOCK_MIN`` (``"blocks"``).
 
     Returns
     -------
@@ -118,9 +145,89 @@ def simulate_zoh(model: TFModel, u: np.ndarray, rate_hz: float, *, hold: str = "
     lag = int(round(model.delay_s * rate_hz))
     if lag > 0:
         x = np.concatenate([np.zeros(min(lag, x.size)), x[: max(x.size - lag, 0)]])
-    y = _sim_modal(np.asarray(model.num, float), np.asarray(model.den, float), x, 1.0 / rate_hz)
-    # where the data's sample sits between two simulated samples, in samples
-    return _at_shift(y, (block - 1) / (2.0 * block) + (0.5 if hold == "centred" else 0.0) + float(shift))
+    num, den, dt = np.asarray(model.num, float), np.asarray(model.den, float), 1.0 / rate_hz
+    # where the data's sample sits between two simulated samples, in samples: the block's raw samples at
+    # i / block (i = 0 .. block - 1) into its working interval, plus the convention's and the offset's shift
+    extra = (0.5 if hold == "centred" else 0.0) + float(shift)
+    rd = read if read is not None else READ
+    if rd not in READS:
+        raise BadInputError(f"read must be one of {', '.join(READS)}, got {rd!r}")
+    if (rd == "exact" and (block > 1 or extra != 0.0)) or (rd == "blocks" and block >= EXACT_BLOCK_MIN):
+        y = _sim_modal_at(num, den, x, dt, np.arange(block) / block + extra)
+        if y is not None:
+            return y
+    y = _sim_modal(num, den, x, dt)
+    return _at_shift(y, (block - 1) / (2.0 * block) + extra)
+
+
+def _sim_modal_at(num: np.ndarray, den: np.ndarray, u: np.ndarray, dt: float, fracs: np.ndarray) -> np.ndarray | None:
+    """The mean over ``fracs`` of the output read ``frac`` samples after each interval start, exact for the held input.
+
+    ``out[k] = mean_i y(t_k + fracs[i] dt)`` (``fracs`` in samples, any sign; a read before the first
+    or after the last interval start takes the end sample's interval). Each mode ``r / (s - p)`` of
+    the partial fractions has the state ``x_k`` at the interval starts (``x_{k+1} = e^{p dt} x_k +
+    (e^{p dt} - 1) / p u_k``, from rest) and, ``a`` (0 <= a < 1) into the interval,
+    ``x = e^{p a dt} x_k + (e^{p a dt} - 1) / p u_k``: the mean over the fractions is a
+    combination of ``x_k`` and ``u_k`` (per whole sample of the fractions) with the mean of
+    ``e^{p a dt}`` as its weight, as cheap as one read. For (nearly) repeated poles, where the
+    partial fractions lose their accuracy, the state-space form's exact read
+    (:class:`hasel.lti.ZohAt`). Output unit; None when neither can be built (the caller
+    interpolates).
+    """
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))) or den[0] == 0:
+        return np.full(u.shape, np.nan)
+    den = den / den[0]
+    num = num / den[0] if num.size else num
+    n_p = den.size - 1
+    d = float(num[0]) if num.size == den.size else 0.0
+    strictly = np.polysub(num, d * den) if d != 0.0 else num
+    fr = np.asarray(fracs, float)
+    whole = np.floor(fr).astype(int)
+    a = fr - whole
+    n = u.size
+    out = np.zeros(n)
+    ks = np.arange(n)
+    groups = [(int(w), a[whole == w]) for w in np.unique(whole)]
+    idx = {w: np.clip(ks + w, 0, n - 1) for w, _ in groups}
+    if d != 0.0:
+        for w, aw in groups:
+            out += d * (aw.size / fr.size) * u[idx[w]]
+    if n_p == 0:
+        return out
+    poles = np.roots(den)
+    sep = np.where(np.eye(n_p, dtype=bool), np.inf, np.abs(poles[:, None] - poles[None, :]))
+    if np.min(sep) < 1e-5 * max(float(np.max(np.abs(poles))), 1e-12):
+        # (nearly) repeated poles: the state-space form's exact read (hasel.lti.ZohAt), from rest
+        try:
+            z = ZohAt(num, den, dt)
+            # from a zero state (as the partial fractions): at rest with 0 one sample before u[0]
+            X = z.states(np.concatenate([[0.0], u]))[1:]
+        except (BadInputError, ValueError, np.linalg.LinAlgError, StopIteration):
+            return None
+        for w, aw in groups:
+            for ai in aw:
+                c, dd = z.rows(float(ai))
+                out += (X[idx[w]] @ c + (dd - d) * u[idx[w]]) / fr.size
+        return out
+    res = np.polyval(strictly, poles) / np.polyval(np.polyder(den), poles)
+    uc = u.astype(complex)
+    for p, r in zip(poles, res):
+        if p.imag < 0 and abs(p.imag) > 1e-9 * max(abs(p), 1e-12):
+            continue   # the pair's other pole: counted twice through the real part below
+        real = abs(p.imag) <= 1e-9 * max(abs(p), 1e-12)
+        if real:
+            p, r = complex(p.real, 0.0), complex(np.real(r), 0.0)
+        E = np.exp(p * dt)
+        b = (E - 1.0) / p if abs(p) > 1e-300 else dt
+        x = signal.lfilter([0.0, b], [1.0, -E], uc)
+        acc = np.zeros(n, complex)
+        for w, aw in groups:
+            ea = np.exp(p * aw * dt)
+            cx = ea.sum() / fr.size
+            cu = ((ea.sum() - aw.size) / p if abs(p) > 1e-300 else aw.sum() * dt) / fr.size
+            acc += cx * x[idx[w]] + cu * u[idx[w]]
+        out += (1.0 if real else 2.0) * np.real(r * acc)
+    return out
 
 
 def _at_shift(y: np.ndarray, frac: float) -> np.ndarray:
