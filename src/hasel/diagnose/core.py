@@ -64,6 +64,7 @@ from hasel.diagnose.prep import prepare
 from hasel.diagnose.setup_stages import _model_stage, _noise_stage, _nominal_model
 from hasel.diagnose.significance import _alike, block_test, coloured_z
 from hasel.diagnose.wording import _evidence
+from hasel.effects.drift import LEVEL_CARRIERS
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.registry import family
 from hasel.errors import BadInputError
@@ -148,6 +149,13 @@ def _fit_one(ctx: _Context, base: dict[str, EffectFit], name: str) -> Candidate 
             return None
     eff = dict(base)
     eff[name] = fit
+    carriers = [k for k in base if k in LEVEL_CARRIERS]
+    if name == "charge_drift" and carriers:
+        # the map fitted before holds the drift's mean in its constant, and the drift was fitted beside a constant
+        # it does not keep (hasel.effects.drift._fit_drift): the map is refitted given the drift (and the drift
+        # given it), each refit kept only when the training error falls (_alternate)
+        eff = _alternate(ctx, eff, carriers + [name])
+        fit = eff[name]
     m_tr, m_ho, e_new = ctx.scores(eff)
     if ctx.identified:
         try:
