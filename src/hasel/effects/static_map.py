@@ -10,6 +10,12 @@ Forms
 - generic ``internal`` (``(b_0 .. b_d)``): ``y + G1(s sum_j b_j w^j)`` after the
   dynamics, ``w = (y - y_c) / y_s``, ``G1 = G / G(0)`` (a stiffness-like force fed back
   through the dynamics: it needs the linear model, ``scales.num``/``scales.den``).
+- generic ``after_hysteresis`` (``theta = (a_0 .. a_d)``): the input map's polynomial applied to the
+  hysteresis output (``x_h + s sum_j a_j z^j``, ``z = (x_h - u_c) / u_s``), between the hysteresis and the
+  dynamics: an actuator whose hysteretic strain is then bent by a static curve (the tuning simulator
+  ``bench/hasel_bench/othersim.py`` applies its static map there). Offered only beside an accepted
+  hysteresis, by the diagnosis's map-side check (:func:`fit_after_hysteresis`); its name stays
+  ``static_nonlinearity`` (the verdict names families, not slots).
 - generic ``input:dead`` (``theta = (threshold_kv, gain, width_kv)``, input units): a dead band before the
   dynamics, ``g (w sp((x - d) / w) - w sp((-x - d) / w))``, ``sp(a) = log(1 + e^a)`` (:func:`dead_map`):
   nothing passes below the threshold ``d`` (a HASEL does not move until the field overcomes the film's
@@ -38,7 +44,7 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
+__all__ = ["AFTER_HYST", "fit_after_hysteresis", "StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
            "dead_flat_share", "apply_input",
            "DEAD", "DEAD_GRID_QUANTILES", "map_sides", "InternalMapStage", "max_degree", "describe_dead", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
            "StaticMapFamily", "FAMILY"]
@@ -61,6 +67,9 @@ CURVE_LEFT_SHARE = 0.25
 #: 1.40-2.45 with the right side best, and the map-plus-another-effect pairs 1.03-1.14.
 SIDES_SEPARABLE = 1.3
 
+#: The variant of the polynomial map acting on the hysteresis output (slot 3.5 of
+#: :data:`hasel.effects.base.SLOT_ORDER`, between the hysteresis and the dynamics).
+AFTER_HYST = "after_hysteresis"
 #: The dead-band form's variant (an input-side map: the chain's input slot).
 DEAD = "input:dead"
 #: Starting thresholds of the dead band: these quantiles of the map's input ``|x|`` over the training
@@ -134,7 +143,7 @@ class StaticNonlinearity(Effect):
 
 
 def input_map(theta, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
-    """The generic input map ``x + u_s sum_j theta_j z^j``, ``z = (x - u_c) / u_s`` (clipped to [-1, 1])."""
+    """The generic input map (also the map after the hysteresis) ``x + u_s sum_j theta_j z^j``, ``z = (x - u_c) / u_s`` (clipped to [-1, 1])."""
     z = (x - u_c) / u_s
     return x + u_s * poly_map(theta, z)
 
@@ -194,7 +203,7 @@ def dead_flat_share(theta, x: np.ndarray) -> float:
 
 def apply_input(fit: EffectFit, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
     """The effective input (input unit) of an input-side map ``fit``: the dead band (variant
-    :data:`DEAD`) or the polynomial (variant ``"input"``, normalised by ``u_c``, ``u_s``)."""
+    :data:`DEAD`) or the polynomial (variant ``"input"`` or :data:`AFTER_HYST`, normalised by ``u_c``, ``u_s``)."""
     if fit.variant == DEAD:
         return dead_map(fit.theta, x)
     return input_map(fit.theta, x, u_c, u_s)
@@ -348,6 +357,16 @@ def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit
     return poly
 
 
+def fit_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The polynomial map of the hysteresis output (:data:`AFTER_HYST`) with ``effects`` fixed (they must
+    hold a hysteresis; None otherwise): least squares on the responses to the monomials of the hysteresis
+    output (degree by cross-validation, only the offset if nearly a line), refined where a nonlinear stage
+    follows (:func:`fit_variant`)."""
+    if "hysteresis" not in effects:
+        return None
+    return fit_variant(pipe, effects, AFTER_HYST)
+
+
 def _fit_static(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best, best_cost = None, np.inf
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
@@ -363,8 +382,8 @@ def _static_basis(pipe: FitContext, effects: dict[str, EffectFit], variant: str)
     """Least-squares basis of the static map ``variant``: the responses to its monomials."""
     def basis(ri, st):
         sim = pipe.linear_of(effects)
-        if variant == "input":
-            z = (st["x_map"] - pipe.u_c) / pipe.u_s
+        if variant in ("input", AFTER_HYST):
+            z = (st["x_map" if variant == "input" else "x_hyst"] - pipe.u_c) / pipe.u_s
             return [sim.run(pipe.u_s * m) for m in monomials(z, STATIC_DEGREE + 1)]
         w = (st["y_lin"] - pipe.y_c) / pipe.y_s
         g1 = pipe.unit(sim)
@@ -419,7 +438,7 @@ class StaticMapFamily(EffectFamily):
 
     name = "static_nonlinearity"
     slot = "input"
-    variants = ("input", "internal")
+    variants = ("input", "internal", AFTER_HYST)
     truth_class = StaticNonlinearity
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -448,7 +467,7 @@ class StaticMapFamily(EffectFamily):
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> MapStage | InternalMapStage:
         """The input map (memoryless: the polynomial or the dead band), or the internal map through the
         linear model ``scales.num/den``."""
-        if fit.variant.split(":")[0] == "input":
+        if fit.variant.split(":")[0] == "input" or fit.variant == AFTER_HYST:
             return MapStage(lambda x: apply_input(fit, x, scales.u_c, scales.u_s))
         return InternalMapStage(fit.theta, getattr(scales, "num"), getattr(scales, "den"), scales.y_c, scales.y_s,
                                 dt_s)
@@ -471,8 +490,9 @@ class StaticMapFamily(EffectFamily):
         if fit.variant == DEAD:
             return describe_dead(ctx, fit, units, effects)
         out = describe_poly(ctx, fit, units)
-        g0 = ctx.linear_of(effects or {}).dc_gain if fit.variant == "input" else 1.0
-        out["output_offset_at_centre"] = float(g0 * (ctx.u_s if fit.variant == "input" else ctx.y_s) * fit.theta[0])
+        ins = fit.variant in ("input", AFTER_HYST)
+        g0 = ctx.linear_of(effects or {}).dc_gain if ins else 1.0
+        out["output_offset_at_centre"] = float(g0 * (ctx.u_s if ins else ctx.y_s) * fit.theta[0])
         out["output_offset_unit"] = units[1]
         return out
 
@@ -531,7 +551,8 @@ def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
     """A polynomial map's description (static or sensor): coefficients, normalisation and curve."""
     ui, uo = units
     th = fit.theta
-    side = "output" if fit.name == "sensor_nonlinearity" else ("input" if fit.variant == "input" else "output")
+    side = ("output" if fit.name == "sensor_nonlinearity" else
+            ("input" if fit.variant in ("input", AFTER_HYST) else "output"))
     c, s = (ctx.u_c, ctx.u_s) if side == "input" else (ctx.y_c, ctx.y_s)
     names = (tuple(f"z^{j}" for j in range(len(th))) if fit.name == "static_nonlinearity"
              else tuple(f"w^{j}" for j in range(len(th))))
@@ -539,6 +560,9 @@ def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
     out["normalisation"] = {"centre": c, "half_range": s, "unit": ui if side == "input" else uo,
                             "form": ("x + s*sum_j a_j z^j, z = (x - c)/s"
                                      if fit.name == "static_nonlinearity" and fit.variant == "input" else
+                                     "x_h + s*sum_j a_j z^j, z = (x_h - c)/s, x_h the hysteresis output (the map acts "
+                                     "after the hysteresis, before the dynamics)"
+                                     if fit.name == "static_nonlinearity" and fit.variant == AFTER_HYST else
                                      "y + G1(s*sum_j b_j w^j), w = (y - c)/s, G1 = G/G(0)"
                                      if fit.name == "static_nonlinearity" else
                                      "y + s*sum_j c_j w^j, w = (y - c)/s")}
