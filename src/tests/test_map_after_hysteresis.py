@@ -12,7 +12,8 @@ from hasel import paper
 from hasel.diagnose.augment import Pipeline, _sse
 from hasel.diagnose.prep import prepare
 from hasel.effects.base import SLOT_ORDER, EffectFit
-from hasel.effects.static_map import AFTER_HYST, fit_after_hysteresis, fit_variant, input_map
+from hasel.effects.static_map import (AFTER_HYST, AFTER_HYST_KNEE, fit_after_hysteresis, fit_variant, input_map,
+                                      knee_map, linear_static)
 from hasel.plantchain import FileActuator
 from hasel.plantfile import parse_plant
 
@@ -106,3 +107,39 @@ def test_pipeline_applies_the_map_to_the_hysteresis_output_and_the_fit_recovers_
     before = fit_variant(pipe, {"hysteresis": HYST}, "input")
     s_before = _sse(pipe, {"hysteresis": HYST, "static_nonlinearity": before})
     assert s_before > 100.0 * s_after, (s_before, s_after)
+
+
+#: a knee after the hysteresis (as the tuning simulator draws them: a line whose slope drops by 40 % above
+#: 4 kV; ``x + u_s (a_0 + a_1 z) + dead_map((d, g, w), x)``, a nearly hard corner of 0.02 kV)
+KNEE = (0.02, 0.05, 4.0, -0.4, 0.02)
+
+
+def test_knee_after_the_hysteresis_is_chosen_over_the_polynomial_and_recovered():
+    true = EffectFit("static_nonlinearity", AFTER_HYST_KNEE, KNEE)
+    pipe = _log_pipe({"hysteresis": HYST, "static_nonlinearity": true})
+    st = pipe.stages({"hysteresis": HYST, "static_nonlinearity": true}, 0)
+    np.testing.assert_allclose(st["x_eff"], knee_map(KNEE, st["x_hyst"], pipe.u_c, pipe.u_s), rtol=0, atol=1e-12)
+    s0 = _sse(pipe, {"hysteresis": HYST})
+    poly = fit_after_hysteresis(pipe, {"hysteresis": HYST}, AFTER_HYST)
+    s_poly = _sse(pipe, {"hysteresis": HYST, "static_nonlinearity": poly})
+    fit = fit_after_hysteresis(pipe, {"hysteresis": HYST})  # both forms, the lower validation error kept
+    assert fit is not None and fit.variant == AFTER_HYST_KNEE
+    s_knee = _sse(pipe, {"hysteresis": HYST, "static_nonlinearity": fit})
+    # sums of squares (mm^2): none 86.4, the degree-5 polynomial 0.68, the knee 3e-12 (noiseless log)
+    assert s_poly < 0.01 * s0 and s_knee < 1e-6 * s_poly, (s_knee, s_poly, s0)
+    np.testing.assert_allclose(fit.theta, KNEE, atol=1e-4)  # threshold to 0.1 V, the corner's width too
+    # not a gain and an offset
+    assert not linear_static(pipe, {"hysteresis": HYST, "static_nonlinearity": fit})
+
+
+def test_fitted_chain_with_the_knee_after_the_hysteresis_in_5ms_blocks_equals_one_call():
+    obj = _plant(AFTER_HYST)
+    obj["effects"][1] = {"name": "static_nonlinearity", "form": "fitted", "variant": AFTER_HYST_KNEE,
+                         "params": dict(zip(("z^0", "z^1", "threshold", "gain", "width"), KNEE))}
+    u = _command()
+    whole = FileActuator(parse_plant(obj)).run(u).stroke_mm
+    b = FileActuator(parse_plant(obj))
+    blocks = np.concatenate([b.run(u[i:i + 50]).stroke_mm for i in range(0, u.size, 50)])
+    np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-12)
+    poly = FileActuator(parse_plant(_plant(AFTER_HYST))).run(u).stroke_mm
+    assert float(np.max(np.abs(whole - poly))) > 0.05, "the knee is another map than the polynomial"

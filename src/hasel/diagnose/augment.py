@@ -248,8 +248,9 @@ class Pipeline:
             key = k2
         out["x_hyst"] = x
         f = e.get("static_nonlinearity")
-        if f is not None and f.variant == AFTER_HYST:  # a map of the hysteresis output (before the dynamics)
-            key += ("mh",) + f.theta
+        # a map of the hysteresis output (the polynomial or the knee; before the dynamics)
+        if f is not None and f.variant.split(":")[0] == AFTER_HYST:
+            key += ("mh", f.variant) + f.theta
             x = apply_input(f, x, self.u_c, self.u_s)
         out["x_eff"] = x
         f = e.get("load_mass")

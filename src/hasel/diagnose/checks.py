@@ -18,7 +18,7 @@ from hasel.diagnose.augment import LINEAR, EffectFit, fit_drift_on_repeats, fit_
 from hasel.diagnose.context import _Context, _fixed, _pick, _raises, _State, _without, raised_resonance
 from hasel.diagnose.significance import _SEPARATING, block_test
 from hasel.effects.evidence import magnitude_evidence
-from hasel.effects.static_map import AFTER_HYST, fit_after_hysteresis
+from hasel.effects.static_map import fit_after_hysteresis, is_after_hysteresis
 
 __all__: list[str] = []
 
@@ -242,7 +242,7 @@ def _follow(ctx: _Context, effects: dict[str, EffectFit]) -> dict[str, EffectFit
         for k in [k for k, v in trial.items() if not _fixed(k, v)]:
             others = {kk: vv for kk, vv in trial.items() if kk != k}
             try:
-                f = (fit_after_hysteresis(pipe, others) if trial[k].variant == AFTER_HYST
+                f = (fit_after_hysteresis(pipe, others, trial[k].variant) if is_after_hysteresis(trial[k].variant)
                      else fit_family(pipe, others, k, init=trial[k]))
             except (np.linalg.LinAlgError, ValueError, FloatingPointError):
                 f = None
@@ -267,7 +267,7 @@ def _after_hysteresis_side(ctx: _Context, st: _State, name: str) -> None:
     hysteresis (the lower validation error decides between two forms of one name)."""
     pipe = ctx.pipe
     cur = st.current[name]
-    if name == "static_nonlinearity" and cur.variant == AFTER_HYST:
+    if name == "static_nonlinearity" and is_after_hysteresis(cur.variant):
         return
     rest = _without(st.current, name)
     try:
@@ -279,7 +279,7 @@ def _after_hysteresis_side(ctx: _Context, st: _State, name: str) -> None:
         return
     alt = _follow(ctx, {**rest, "static_nonlinearity": fit})
     alt_fit = alt.get("static_nonlinearity")
-    why = ("its refinement dropped it" if alt_fit is None or alt_fit.variant != AFTER_HYST
+    why = ("its refinement dropped it" if alt_fit is None or not is_after_hysteresis(alt_fit.variant)
            or "hysteresis" not in alt else
            "it came out a gain and an offset" if linear_static(pipe, alt) else
            # a load raising the resonance is no reason when the final set's does too (the backward check takes
