@@ -5,7 +5,7 @@
 - Truth forms: :class:`hasel.effects.TruthActuator` with the file's P(s) (the same
   chain and stages as ``--plant truth:...``).
 - Fitted forms: :class:`FittedChain`, the diagnosis's chain (delay, input clip or slew
-  limit, input map, hysteresis, P(s) with load, internal map, asymmetric lag or speed
+  limit, input map, hysteresis, map after the hysteresis, P(s) with load, internal map, asymmetric lag or speed
   limit, drift, output clip, sensor map) run by each family's own chunked stage
   (:meth:`hasel.effects.base.EffectFamily.stage`), driven by the applied voltage. A
   *measured* clip (the range of the sensor that recorded the data, e.g. a laser reading
@@ -78,6 +78,7 @@ class FittedChain:
         self._sat_in = stage("saturation", "input", "slew")
         self._map_in = stage("static_nonlinearity", "input")
         self._hyst = stage("hysteresis")
+        self._map_hyst = stage("static_nonlinearity", "after_hysteresis")  # a map of the hysteresis output
         self._map_int = stage("static_nonlinearity", "internal")
         self._asym = stage("asymmetric_dynamics")
         self._drift = stage("charge_drift")
@@ -88,7 +89,8 @@ class FittedChain:
         # the input-side stages sit between the amplifier and P(s): P(s) then sees the applied
         # voltage (trapezoidal mean over each sample); without them the command -> stroke path
         # is discretised exactly, as in NominalActuator
-        self._split = any(s is not None for s in (self._delay, self._sat_in, self._map_in, self._hyst))
+        self._split = any(s is not None for s in (self._delay, self._sat_in, self._map_in, self._hyst,
+                                                      self._map_hyst))
         if "load_mass" in fits:
             self._lin: Stage = FAMILIES["load_mass"].stage(fits["load_mass"], sc, dt)
             self._split = True
@@ -106,7 +108,7 @@ class FittedChain:
         x = _rest(self._delay, c)
         x = self._x_sat0 = _rest(self._sat_in, x)
         x = _rest(self._map_in, x)
-        x = self._v_prev = _rest(self._hyst, x)
+        x = self._v_prev = _rest(self._map_hyst, _rest(self._hyst, x))
         y = _rest(self._lin, x if self._split else c)
         y = _rest(self._map_int, y)
         y = _rest(self._asym, y)
@@ -125,7 +127,7 @@ class FittedChain:
         for st in (self._delay, self._sat_in):
             x = x if st is None else st.run(x)
         x_sat = x
-        for st in (self._map_in, self._hyst):
+        for st in (self._map_in, self._hyst, self._map_hyst):
             x = x if st is None else st.run(x)
         if self._split:
             x_mid = 0.5 * (np.concatenate([[self._v_prev], x[:-1]]) + x)

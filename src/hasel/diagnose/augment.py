@@ -14,6 +14,9 @@ saturation          input or output         clip at a lower or an upper limit; o
                                             or (``slew``, input) a slew-rate limit:
                                             the input moves at most ``S`` per second
 static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (degree 5),
+                    (or after_hysteresis)   (``after_hysteresis``: the same map of the
+                                            hysteresis output, offered only beside an
+                                            accepted hysteresis),
                                             or (internal, a stiffness-like force)
                                             ``y + G1(s sum_j b_j w^j)``
                                             ``G1 = G / G(0)``, ``z``, ``w`` the
@@ -45,7 +48,7 @@ charge_drift        output                  ``y (1 + g q) + s o q``, ``q`` a slo
 sensor_nonlinearity output (last)           ``y + s sum_j c_j w^j`` (degree 5)
 =================== ======================= =========================================
 
-The chain order is: delay, input saturation, input map, hysteresis, G (with load),
+The chain order is: delay, input saturation, input map, hysteresis, map after the hysteresis, G (with load),
 internal map, asymmetric lag, drift, output saturation, sensor map, measured clip.
 :class:`Pipeline` simulates any combination with caching of the unchanged upstream
 stages; :func:`fit_family` fits one family's few parameters on the training samples
@@ -85,7 +88,7 @@ from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
 from hasel.effects.saturation import measured_clip, slew_limit
 from hasel.effects.static_map import NEAR_LINEAR_SHARE, linear_static  # noqa: F401
-from hasel.effects.static_map import apply_input
+from hasel.effects.static_map import AFTER_HYST, apply_input
 from hasel.effects.static_map import max_degree as _max_degree
 
 __all__ = ["EffectFit", "Pipeline", "fit_family", "linear_static", "fit_drift_on_repeats", "measured_clip",
@@ -207,7 +210,8 @@ class Pipeline:
     def stages(self, effects: dict[str, EffectFit], ri: int, upto: int = 99) -> dict[str, np.ndarray]:
         """Intermediate signals of record ``ri`` through the chain (up to slot ``upto``, exclusive).
 
-        Keys: ``"x_delay"``, ``"x_sat"``, ``"x_map"``, ``"x_eff"`` (input side), ``"y_lin"``,
+        Keys: ``"x_delay"``, ``"x_sat"``, ``"x_map"``, ``"x_hyst"`` (after the hysteresis), ``"x_eff"`` (after
+        a map of the hysteresis output, if any: the linear part's input) (input side), ``"y_lin"``,
         ``"y_int"``, ``"y_asym"``, ``"y_drift"``, ``"y_sat"``, ``"y"`` (output side); a stage
         past ``upto`` is the identity.
         """
@@ -242,6 +246,12 @@ class Pipeline:
             k2 = key + ("h",) + f.theta
             x = x + sum(w * (p - x) for w, p in zip(f.theta[:len(HYST_THRESHOLDS)], ps))
             key = k2
+        out["x_hyst"] = x
+        f = e.get("static_nonlinearity")
+        # a map of the hysteresis output (the polynomial or the knee; before the dynamics)
+        if f is not None and f.variant.split(":")[0] == AFTER_HYST:
+            key += ("mh", f.variant) + f.theta
+            x = apply_input(f, x, self.u_c, self.u_s)
         out["x_eff"] = x
         f = e.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))

@@ -18,6 +18,7 @@ from hasel.diagnose.augment import LINEAR, EffectFit, fit_drift_on_repeats, fit_
 from hasel.diagnose.context import _Context, _fixed, _pick, _raises, _State, _without, raised_resonance
 from hasel.diagnose.significance import _SEPARATING, block_test
 from hasel.effects.evidence import magnitude_evidence
+from hasel.effects.static_map import AFTER_HYST, AFTER_HYST_KNEE, fit_after_hysteresis, is_after_hysteresis
 
 __all__: list[str] = []
 
@@ -150,7 +151,8 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
     the map is replaced by the other side's (fitted given the others, then every effect refined jointly,
     as the set itself was), and the two complete sets are compared on validation as the rounds compare
     candidates (:func:`_pick`: the lower error, near-ties to fewer parameters, then to the input side).
-    Not beside a hysteresis (the chain puts an input map before it). When the held-out block test prefers neither by ``t_min``, the verdict lists both as
+    Beside a hysteresis the map is instead compared with a map of the hysteresis output
+    (:func:`_after_hysteresis_side`). When the held-out block test prefers neither by ``t_min``, the verdict lists both as
     ambiguous with their numbers and the experiment that separates them. Only for sets of two or more
     searched effects (alone, the first round already compared the two sides on equal terms)."""
     names_ = [k for k, v in st.current.items() if k != LINEAR and not _fixed(k, v)]
@@ -160,7 +162,13 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
         # beside a hysteresis the chain puts an input map before it, while a map after the hysteresis (an
         # actuator's curve of its hysteretic strain) is closer to a sensor curve at low frequencies: the
         # comparison would favour the output side for the chain's order, not for the data
-        # (``maps.py`` seed 41, map_10: a power law after a Duhem lag moved to the output side)
+        # (``maps.py`` seed 41, map_10: a power law after a Duhem lag moved to the output side). Instead the
+        # map is compared with one of the hysteresis output (the slot between the hysteresis and the dynamics),
+        # offered only here: the one branch point from main's code path (every set without an accepted
+        # hysteresis, or without exactly one searched map beside it, returns here unchanged)
+        if (len(have) == 1 and len(names_) >= 2 and "hysteresis" in st.current
+                and not _fixed(have[0], st.current[have[0]])):
+            _after_hysteresis_side(ctx, st, have[0])
         return
     name = have[0]
     other = _MAP_SIDES[name]
@@ -205,6 +213,140 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
         if name in st.evidence_of:
             st.evidence_of[other] = st.evidence_of.pop(name)
         st.adopt(dict(alt), m_tr, m_ho, e_alt)
+
+
+#: Rounds in which every searched effect of a set beside a hysteresis is refitted given the others (each from
+#: its current values) before the joint refinement, in :func:`_after_hysteresis_side`: the map of the hysteresis
+#: output is fitted after the others, which were fitted beside the other map (as the repeat check's two rounds;
+#: on ``other_pairs.py`` seed 5 case 6 the first round took the map after the hysteresis from validation NRMSE
+#: 0.0189 to 0.0183, the second to 0.0178, the joint refinement to 0.0175). The set it is compared with gets
+#: the same rounds (only to score it: it is kept as it was unless the map after the hysteresis wins).
+AFTER_HYST_ROUNDS = 2
+#: A sensor curve is renamed ``static_nonlinearity`` after the hysteresis only when, besides the lower validation
+#: error (:func:`_pick`), the held-out block test prefers the map after the hysteresis by at least this score (a
+#: renaming needs evidence beyond a lower mean: the first version, on validation error alone, renamed a true
+#: sensor curve). Set on two tuning cases: ``maps.py`` seed 41 map_15 (a knee input map after a Duhem
+#: hysteresis, the map after the hysteresis 0.0136 against the sensor curve's 0.0142, block preference 2.9)
+#: and ``multi2.py`` seed 21 m2_09 (a tanh sensor beside a backlash: 0.0258 against 0.0265, block preference
+#: -0.1); 1.0 is a one-sigma preference, between the two.
+AFTER_HYST_PREF_MIN = 1.0
+
+
+def _follow(ctx: _Context, effects: dict[str, EffectFit]) -> dict[str, EffectFit]:
+    """``effects`` after :data:`AFTER_HYST_ROUNDS` rounds of refitting each searched effect given the others
+    (a map of the hysteresis output by :func:`fit_after_hysteresis`, the rest by their families' fits
+    warm-started from their values), then refined jointly (:func:`joint_refine`)."""
+    pipe = ctx.pipe
+    trial = dict(effects)
+    for _ in range(AFTER_HYST_ROUNDS):
+        for k in [k for k, v in trial.items() if not _fixed(k, v)]:
+            others = {kk: vv for kk, vv in trial.items() if kk != k}
+            try:
+                f = (fit_after_hysteresis(pipe, others, trial[k].variant) if is_after_hysteresis(trial[k].variant)
+                     else fit_family(pipe, others, k, init=trial[k]))
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+                f = None
+            if f is not None and f.variant == trial[k].variant:
+                trial[k] = f
+    return joint_refine(pipe, trial, max_nfev=ctx.opts.joint_refine_nfev)
+
+
+def _after_hysteresis_side(ctx: _Context, st: _State, name: str) -> None:
+    """Stage (beside an accepted hysteresis only): the map ``name`` of the final set (an input map before the
+    hysteresis or a sensor curve after the dynamics) against a ``static_nonlinearity`` acting on the
+    hysteresis output, before the dynamics (variant :data:`hasel.effects.static_map.AFTER_HYST`).
+
+    The map of the hysteresis output is fitted with the others in place (least squares, its fit is
+    nonlinear in the hysteresis weights), then every searched effect is refitted given the others and all
+    are refined jointly (:func:`_follow`). The final set gets the same treatment, only to score it fairly
+    (the better of it as it is and as refitted stands for it). The two are compared on validation as the map
+    sides are (:func:`_pick`: the lower error; near-ties to fewer parameters, then to the input side), and a
+    renaming also needs the held-out block test to prefer it by :data:`AFTER_HYST_PREF_MIN`. A sensor curve
+    that loses is renamed ``static_nonlinearity`` (the
+    verdict names families, not slots); an input map that loses keeps its name and moves after the
+    hysteresis (the lower validation error decides between two forms of one name)."""
+    pipe = ctx.pipe
+    cur = st.current[name]
+    if name == "static_nonlinearity" and is_after_hysteresis(cur.variant):
+        return
+    rest = _without(st.current, name)
+    # both forms (the polynomial and the knee), each refitted with the others (:func:`_follow`), the lower
+    # validation error kept: chosen before the refits the knee lost where it won after them (``other_pairs.py``
+    # seed 5 case 6: 29.4 against 16.2 before, NRMSE 0.0134 against 0.0175 after; ``maps.py`` seed 41 map_15)
+    alt, m_best = None, np.inf
+    for form in (AFTER_HYST, AFTER_HYST_KNEE):
+        try:
+            fit = fit_after_hysteresis(pipe, rest, form)
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            fit = None
+        if fit is None:
+            continue
+        cand = _follow(ctx, {**rest, "static_nonlinearity": fit})
+        m_c = ctx.scores(cand)[1]
+        if m_c < m_best:
+            alt, m_best = cand, m_c
+    if alt is None:
+        ctx.say(f"map after the hysteresis: could not be fitted beside the others; {name} kept")
+        return
+    alt_fit = alt.get("static_nonlinearity")
+    why = ("its refinement dropped it" if alt_fit is None or not is_after_hysteresis(alt_fit.variant)
+           or "hysteresis" not in alt else
+           "it came out a gain and an offset" if linear_static(pipe, alt) else
+           # a load raising the resonance is no reason when the final set's does too (the backward check takes
+           # such a load out of either: ``combos.py`` seed 21, combo_13)
+           "the set raises a resonance" if _raises(ctx, alt) and not _raises(ctx, st.current) else "")
+    if why:
+        ctx.say(f"map after the hysteresis: not compared ({why}); {name} kept")
+        return
+    m_tr, m_ho, e_alt = ctx.scores(alt)
+    # the final set refitted the same way (scored only): the map after the hysteresis must beat the better
+    ref = _follow(ctx, st.current)
+    m_ref, e_ref = st.mse_ho, st.e_ho
+    if ((not _raises(ctx, ref) or _raises(ctx, st.current)) and not linear_static(pipe, ref)
+            and set(ref) == set(st.current)):
+        _, m_r, e_r = ctx.scores(ref)
+        if m_r < m_ref:
+            m_ref, e_ref = m_r, e_r
+    n_cur = sum(f.n_params for f in st.current.values())
+    n_alt = sum(f.n_params for f in alt.values())
+    if name == "static_nonlinearity":  # the same name on both sides: the lower validation error decides
+        switch = m_ho < m_ref
+    else:
+        switch = _pick(sorted([(m_ref, n_cur, name), (m_ho, n_alt, "static_nonlinearity")],
+                              key=lambda r: (r[0], r[1])))[2] == "static_nonlinearity"
+    e_win, e_lose = (e_alt, e_ref) if switch else (e_ref, e_alt)
+    pref = block_test(e_lose, e_win, ctx.labels_va, ctx.slow_n)
+    if switch and name != "static_nonlinearity" and pref < AFTER_HYST_PREF_MIN:
+        ctx.say(f"map after the hysteresis: lower validation error ({ctx.to_nrmse(m_ho):.4f} against "
+                f"{ctx.to_nrmse(m_ref):.4f}) but the held-out blocks prefer it by only {pref:.1f} (needs "
+                f"{AFTER_HYST_PREF_MIN}); {name} kept")
+        switch = False
+    here = f"{name} ({cur.variant})" if name == "static_nonlinearity" else name
+    ctx.say(f"map after the hysteresis: {here} validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} (refitted "
+            f"{ctx.to_nrmse(m_ref):.4f}), static_nonlinearity after the hysteresis {ctx.to_nrmse(m_ho):.4f} "
+            f"(block preference {pref:.1f}) -> {'the map after the hysteresis' if switch else here}")
+    st.rounds.append({"round": len(st.rounds) + 1, "map_side_check": True, "after_hysteresis": True,
+                      "best": "static_nonlinearity" if switch else name, "accepted": bool(switch), "preference": pref,
+                      "candidates": [
+                          {"name": " + ".join(k for k in st.current if k != LINEAR),
+                           "nrmse_validation": ctx.to_nrmse(m_ref)},
+                          {"name": " + ".join(k for k in alt if k != LINEAR) + " (map after the hysteresis)",
+                           "nrmse_validation": ctx.to_nrmse(m_ho)}]})
+    if not switch:
+        return
+    if name != "static_nonlinearity":
+        st.ambiguous = [a for a in st.ambiguous if {a["chosen"], a["alternative"]} != {name, "static_nonlinearity"}]
+        if pref < ctx.opts.t_min:
+            norm = max(st.mse_nom, 1e-300)
+            st.ambiguous.append({"chosen": "static_nonlinearity", "alternative": name,
+                                 "validation_nrmse": {"chosen": ctx.to_nrmse(m_ho),
+                                                      "alternative": ctx.to_nrmse(m_ref)},
+                                 "gap_removed": {"chosen": 1.0 - m_ho / norm, "alternative": 1.0 - m_ref / norm},
+                                 "preference": pref, "with_others": [k for k in rest if k != LINEAR],
+                                 "experiment": _SEPARATING[frozenset((name, "static_nonlinearity"))]})
+        if name in st.evidence_of:
+            st.evidence_of["static_nonlinearity"] = st.evidence_of.pop(name)
+    st.adopt(dict(alt), m_tr, m_ho, e_alt)
 
 
 def _refit_rest(ctx: _Context, rest: dict[str, EffectFit]) -> tuple[dict[str, EffectFit], float, float, np.ndarray]:

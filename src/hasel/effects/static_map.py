@@ -10,6 +10,18 @@ Forms
 - generic ``internal`` (``(b_0 .. b_d)``): ``y + G1(s sum_j b_j w^j)`` after the
   dynamics, ``w = (y - y_c) / y_s``, ``G1 = G / G(0)`` (a stiffness-like force fed back
   through the dynamics: it needs the linear model, ``scales.num``/``scales.den``).
+- generic ``after_hysteresis`` (``theta = (a_0 .. a_d)``): the input map's polynomial applied to the
+  hysteresis output (``x_h + s sum_j a_j z^j``, ``z = (x_h - u_c) / u_s``), between the hysteresis and the
+  dynamics: an actuator whose hysteretic strain is then bent by a static curve (the tuning simulator
+  ``bench/hasel_bench/othersim.py`` applies its static map there). Offered only beside an accepted
+  hysteresis, by the diagnosis's map-side check (:func:`fit_after_hysteresis`); its name stays
+  ``static_nonlinearity`` (the verdict names families, not slots).
+- generic ``after_hysteresis:knee`` (``theta = (a_0, a_1, threshold_kv, gain, width_kv)``): the map after the
+  hysteresis as a line with one corner, ``x_h + s (a_0 + a_1 z) + dead_map((d, g, w), x_h)``
+  (:func:`knee_map`): the slope changes by ``g`` beyond ``|x_h| = d``, the corner rounded over about ``w``. The
+  tuning simulator's knees are piecewise linear, which a degree-5 polynomial follows poorly; the dead band's
+  corner (:func:`dead_map`, reused) beside a line is that form. :func:`fit_after_hysteresis` fits both and
+  keeps the one with the lower validation error.
 - generic ``input:dead`` (``theta = (threshold_kv, gain, width_kv)``, input units): a dead band before the
   dynamics, ``g (w sp((x - d) / w) - w sp((-x - d) / w))``, ``sp(a) = log(1 + e^a)`` (:func:`dead_map`):
   nothing passes below the threshold ``d`` (a HASEL does not move until the field overcomes the film's
@@ -38,7 +50,8 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
+__all__ = ["AFTER_HYST", "AFTER_HYST_KNEE", "fit_after_hysteresis", "fit_knee_after_hysteresis", "knee_map",
+           "is_after_hysteresis", "KNEE_GRID_QUANTILES", "StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
            "dead_flat_share", "apply_input",
            "DEAD", "DEAD_GRID_QUANTILES", "map_sides", "InternalMapStage", "max_degree", "describe_dead", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
            "StaticMapFamily", "FAMILY"]
@@ -61,6 +74,15 @@ CURVE_LEFT_SHARE = 0.25
 #: 1.40-2.45 with the right side best, and the map-plus-another-effect pairs 1.03-1.14.
 SIDES_SEPARABLE = 1.3
 
+#: The variant of the polynomial map acting on the hysteresis output (slot 3.5 of
+#: :data:`hasel.effects.base.SLOT_ORDER`, between the hysteresis and the dynamics).
+AFTER_HYST = "after_hysteresis"
+#: The knee (corner) form of the map after the hysteresis (:func:`knee_map`).
+AFTER_HYST_KNEE = AFTER_HYST + ":knee"
+#: Starting corners of the knee after the hysteresis: these quantiles of the hysteresis output over the
+#: training samples (a corner needs data on both sides; the tuning simulator's knees, 3-4.5 kV in a drive up
+#: to about 5-6 kV, lie there). Set by the form, not tuned: evenly spaced deciles.
+KNEE_GRID_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 #: The dead-band form's variant (an input-side map: the chain's input slot).
 DEAD = "input:dead"
 #: Starting thresholds of the dead band: these quantiles of the map's input ``|x|`` over the training
@@ -134,7 +156,7 @@ class StaticNonlinearity(Effect):
 
 
 def input_map(theta, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
-    """The generic input map ``x + u_s sum_j theta_j z^j``, ``z = (x - u_c) / u_s`` (clipped to [-1, 1])."""
+    """The generic input map (also the map after the hysteresis) ``x + u_s sum_j theta_j z^j``, ``z = (x - u_c) / u_s`` (clipped to [-1, 1])."""
     z = (x - u_c) / u_s
     return x + u_s * poly_map(theta, z)
 
@@ -147,6 +169,21 @@ def dead_map(theta, x: np.ndarray) -> np.ndarray:
     d, g, w = (float(v) for v in theta[:3])
     x = np.asarray(x, float)
     return g * w * (np.logaddexp(0.0, (x - d) / w) - np.logaddexp(0.0, (-x - d) / w))
+
+
+def knee_map(theta, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
+    """The knee after the hysteresis ``x + u_s (a_0 + a_1 z) + dead_map((d, g, w), x)`` (input unit, e.g. kV),
+    ``theta = (a_0, a_1, d, g, w)``, ``z = (x - u_c) / u_s``: a line whose slope changes by ``g`` beyond
+    ``|x| = d`` (threshold ``d`` and corner width ``w`` in the input's unit, ``a_0``, ``a_1``, ``g``
+    dimensionless)."""
+    x = np.asarray(x, float)
+    a0, a1 = float(theta[0]), float(theta[1])
+    return x + u_s * (a0 + a1 * (x - u_c) / u_s) + dead_map(theta[2:5], x)
+
+
+def is_after_hysteresis(variant: str) -> bool:
+    """Whether ``variant`` is a map of the hysteresis output (the polynomial or the knee)."""
+    return variant.split(":")[0] == AFTER_HYST
 
 
 def dead_slope(theta, x: np.ndarray) -> np.ndarray:
@@ -194,9 +231,11 @@ def dead_flat_share(theta, x: np.ndarray) -> float:
 
 def apply_input(fit: EffectFit, x: np.ndarray, u_c: float, u_s: float) -> np.ndarray:
     """The effective input (input unit) of an input-side map ``fit``: the dead band (variant
-    :data:`DEAD`) or the polynomial (variant ``"input"``, normalised by ``u_c``, ``u_s``)."""
+    :data:`DEAD`) or the polynomial (variant ``"input"`` or :data:`AFTER_HYST`, normalised by ``u_c``, ``u_s``)."""
     if fit.variant == DEAD:
         return dead_map(fit.theta, x)
+    if fit.variant == AFTER_HYST_KNEE:
+        return knee_map(fit.theta, x, u_c, u_s)
     return input_map(fit.theta, x, u_c, u_s)
 
 
@@ -348,6 +387,79 @@ def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit
     return poly
 
 
+def fit_knee_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The knee after the hysteresis (:data:`AFTER_HYST_KNEE`, :func:`knee_map`) with ``effects`` fixed: corners
+    at the quantiles :data:`KNEE_GRID_QUANTILES` of the hysteresis output (training samples), the width at
+    :data:`DEAD_WIDTH_START` times ``u_s``, each with its offset, slope and change of slope by least squares on
+    the training residual (exact with nothing nonlinear after the map, else a start); the best refined by
+    nonlinear least squares (:data:`DEAD_REFINE_NFEV` evaluations, within :meth:`StaticMapFamily.bounds`).
+    None without a hysteresis or where the input holds fewer than three levels."""
+    if "hysteresis" not in effects or getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
+        return None
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    recs = [(ri, rec) for ri, rec in enumerate(pipe.prep.records) if rec.train.any()]
+    sts = {ri: pipe.stages(base, ri) for ri, _ in recs}
+    xh = np.concatenate([sts[ri]["x_hyst"][rec.train] for ri, rec in recs] or [np.zeros(0)])
+    if xh.size < 10:
+        return None
+    grid = np.unique(np.round(np.quantile(np.abs(xh), KNEE_GRID_QUANTILES), 9))
+    grid = grid[grid > 0]
+    if grid.size == 0:
+        return None
+    w = DEAD_WIDTH_START * pipe.u_s
+    sim = pipe.linear_of(base)
+    AA = np.zeros((grid.size, 3, 3))
+    Ab = np.zeros((grid.size, 3))
+    for ri, rec in recs:
+        st, m = sts[ri], rec.train
+        x = st["x_hyst"]
+        b = (rec.y - st["y"])[m]
+        c0 = sim.run(np.full(x.shape, pipe.u_s))[m]
+        c1 = sim.run(x - pipe.u_c)[m]
+        for k, d in enumerate(grid):
+            B = np.column_stack([c0, c1, sim.run(dead_map((float(d), 1.0, w), x))[m]])
+            AA[k] += B.T @ B
+            Ab[k] += B.T @ b
+    best, best_cost = None, np.inf
+    for k, d in enumerate(grid):
+        M = AA[k] + 1e-9 * float(np.trace(AA[k])) / 3.0 * np.eye(3)  # a ridge only against exact collinearity
+        try:
+            th = np.linalg.solve(M, Ab[k])
+        except np.linalg.LinAlgError:
+            continue
+        cost = float(th @ AA[k] @ th - 2.0 * th @ Ab[k])  # ||b - B th||^2 - ||b||^2
+        if cost < best_cost:
+            best, best_cost = (float(th[0]), float(th[1]), float(d), float(th[2]), float(w)), cost
+    if best is None:
+        return None
+    f0 = EffectFit("static_nonlinearity", AFTER_HYST_KNEE, best)
+    lo, hi = FAMILY.bounds(pipe, f0)
+    return _refine(pipe, base, f0, lo, hi, max_nfev=DEAD_REFINE_NFEV,
+                   x_scale=np.array([0.01, 0.05, 0.02 * pipe.u_s, 0.05, 0.01 * pipe.u_s]))
+
+
+def fit_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit], form: str | None = None) -> EffectFit | None:
+    """The map of the hysteresis output with ``effects`` fixed (they must hold a hysteresis; None otherwise).
+    ``form`` :data:`AFTER_HYST`: the polynomial, least squares on the responses to the monomials of the
+    hysteresis output (degree by cross-validation, only the offset if nearly a line), refined where a nonlinear
+    stage follows (:func:`fit_variant`); :data:`AFTER_HYST_KNEE`: the knee (:func:`fit_knee_after_hysteresis`);
+    None: both, the one with the lower validation error kept (the samples the diagnosis compares sets on)."""
+    if "hysteresis" not in effects:
+        return None
+    if form == AFTER_HYST_KNEE:
+        return fit_knee_after_hysteresis(pipe, effects)
+    poly = fit_variant(pipe, effects, AFTER_HYST)
+    if form is not None:
+        return poly
+    knee = fit_knee_after_hysteresis(pipe, effects)
+    if knee is None:
+        return poly
+    base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
+    s_p = sumsq(pipe.residuals(_with(base, poly), "valid"))
+    s_k = sumsq(pipe.residuals(_with(base, knee), "valid"))
+    return knee if s_k < s_p else poly
+
+
 def _fit_static(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best, best_cost = None, np.inf
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
@@ -363,8 +475,8 @@ def _static_basis(pipe: FitContext, effects: dict[str, EffectFit], variant: str)
     """Least-squares basis of the static map ``variant``: the responses to its monomials."""
     def basis(ri, st):
         sim = pipe.linear_of(effects)
-        if variant == "input":
-            z = (st["x_map"] - pipe.u_c) / pipe.u_s
+        if variant in ("input", AFTER_HYST):
+            z = (st["x_map" if variant == "input" else "x_hyst"] - pipe.u_c) / pipe.u_s
             return [sim.run(pipe.u_s * m) for m in monomials(z, STATIC_DEGREE + 1)]
         w = (st["y_lin"] - pipe.y_c) / pipe.y_s
         g1 = pipe.unit(sim)
@@ -384,8 +496,9 @@ def linear_static(pipe: FitContext, effects: dict[str, EffectFit]) -> bool:
     if f is None or len(f.theta) <= 1:
         return False
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
-    if f.variant == DEAD:  # judged against the input side's polynomial offset and line
-        return _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None,
+    if f.variant in (DEAD, AFTER_HYST_KNEE):  # judged against its side's polynomial offset and line
+        side = "input" if f.variant == DEAD else AFTER_HYST
+        return _nearly_linear(pipe, base, side, _static_basis(pipe, base, side), None,
                               s_full=_sse(pipe, effects))
     return _nearly_linear(pipe, base, f.variant, _static_basis(pipe, base, f.variant), np.asarray(f.theta))
 
@@ -419,7 +532,7 @@ class StaticMapFamily(EffectFamily):
 
     name = "static_nonlinearity"
     slot = "input"
-    variants = ("input", "internal")
+    variants = ("input", "internal", AFTER_HYST)
     truth_class = StaticNonlinearity
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -427,11 +540,18 @@ class StaticMapFamily(EffectFamily):
         "width")`` (input unit, factor, input unit)."""
         if fit.variant == DEAD:
             return ("threshold", "gain", "width")
+        if fit.variant == AFTER_HYST_KNEE:
+            return ("z^0", "z^1", "threshold", "gain", "width")
         return tuple(f"z^{j}" for j in range(len(fit.theta)))
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """The polynomials are free; the dead band's threshold lies in ``[0, u_c + u_s]`` (input unit), its
-        gain in :data:`DEAD_GAIN_BOUNDS`, its width in :data:`DEAD_WIDTH_BOUNDS` times ``u_s``."""
+        gain in :data:`DEAD_GAIN_BOUNDS`, its width in :data:`DEAD_WIDTH_BOUNDS` times ``u_s``; the knee after the
+        hysteresis has the same threshold and width bounds, its line and change of slope free."""
+        if fit.variant == AFTER_HYST_KNEE:
+            inf = np.inf
+            return (np.array([-inf, -inf, 0.0, -inf, DEAD_WIDTH_BOUNDS[0] * ctx.u_s]),
+                    np.array([inf, inf, max(ctx.u_c + ctx.u_s, 1e-12), inf, DEAD_WIDTH_BOUNDS[1] * ctx.u_s]))
         if fit.variant == DEAD:
             return (np.array([0.0, DEAD_GAIN_BOUNDS[0], DEAD_WIDTH_BOUNDS[0] * ctx.u_s]),
                     np.array([max(ctx.u_c + ctx.u_s, 1e-12), DEAD_GAIN_BOUNDS[1], DEAD_WIDTH_BOUNDS[1] * ctx.u_s]))
@@ -440,15 +560,15 @@ class StaticMapFamily(EffectFamily):
     def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds`, except the dead band's narrowest width: a hard corner is an ordinary value."""
         lo, hi = self.bounds(ctx, fit)
-        if fit.variant == DEAD:
+        if fit.variant in (DEAD, AFTER_HYST_KNEE):
             lo = lo.copy()
-            lo[2] = -np.inf
+            lo[2 if fit.variant == DEAD else 4] = -np.inf
         return lo, hi
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> MapStage | InternalMapStage:
         """The input map (memoryless: the polynomial or the dead band), or the internal map through the
         linear model ``scales.num/den``."""
-        if fit.variant.split(":")[0] == "input":
+        if fit.variant.split(":")[0] in ("input", AFTER_HYST):
             return MapStage(lambda x: apply_input(fit, x, scales.u_c, scales.u_s))
         return InternalMapStage(fit.theta, getattr(scales, "num"), getattr(scales, "den"), scales.y_c, scales.y_s,
                                 dt_s)
@@ -470,9 +590,12 @@ class StaticMapFamily(EffectFamily):
         for the dead band its threshold, gain and width with units."""
         if fit.variant == DEAD:
             return describe_dead(ctx, fit, units, effects)
+        if fit.variant == AFTER_HYST_KNEE:
+            return describe_knee(ctx, fit, units, effects)
         out = describe_poly(ctx, fit, units)
-        g0 = ctx.linear_of(effects or {}).dc_gain if fit.variant == "input" else 1.0
-        out["output_offset_at_centre"] = float(g0 * (ctx.u_s if fit.variant == "input" else ctx.y_s) * fit.theta[0])
+        ins = fit.variant in ("input", AFTER_HYST)
+        g0 = ctx.linear_of(effects or {}).dc_gain if ins else 1.0
+        out["output_offset_at_centre"] = float(g0 * (ctx.u_s if ins else ctx.y_s) * fit.theta[0])
         out["output_offset_unit"] = units[1]
         return out
 
@@ -527,11 +650,32 @@ def describe_dead(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effec
     return out
 
 
+def describe_knee(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effects: dict[str, EffectFit]) -> dict:
+    """The knee after the hysteresis's description: offset and slope change (dimensionless), threshold and
+    width (input unit), the map's deviation on 9 points (input unit) and the output offset at the input's
+    centre (output unit)."""
+    ui, uo = units
+    a0, a1, d, g, w = (float(v) for v in fit.theta[:5])
+    c, s = ctx.u_c, ctx.u_s
+    xs = np.linspace(c - s, c + s, 9)
+    g0 = ctx.linear_of(effects or {}).dc_gain
+    return {"variant": fit.variant, "coefficients": {"z^0": a0, "z^1": a1}, "threshold": d, "threshold_unit": ui,
+            "slope_change": g, "width": w, "width_unit": ui,
+            "form": "x_h + s*(a_0 + a_1 z) + g*(w*sp((x_h - d)/w) - w*sp((-x_h - d)/w)), z = (x_h - c)/s, "
+                    "sp(a) = log(1 + exp(a)), x_h the hysteresis output: a line whose slope changes by g beyond "
+                    "|x_h| = d (the map acts after the hysteresis, before the dynamics)",
+            "normalisation": {"centre": c, "half_range": s, "unit": ui},
+            "curve": {"at": xs.tolist(), "deviation": (knee_map(fit.theta, xs, c, s) - xs).tolist()},
+            "output_offset_at_centre": float(g0 * (knee_map(fit.theta, np.array([c]), c, s)[0] - c)),
+            "output_offset_unit": uo}
+
+
 def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
     """A polynomial map's description (static or sensor): coefficients, normalisation and curve."""
     ui, uo = units
     th = fit.theta
-    side = "output" if fit.name == "sensor_nonlinearity" else ("input" if fit.variant == "input" else "output")
+    side = ("output" if fit.name == "sensor_nonlinearity" else
+            ("input" if fit.variant in ("input", AFTER_HYST) else "output"))
     c, s = (ctx.u_c, ctx.u_s) if side == "input" else (ctx.y_c, ctx.y_s)
     names = (tuple(f"z^{j}" for j in range(len(th))) if fit.name == "static_nonlinearity"
              else tuple(f"w^{j}" for j in range(len(th))))
@@ -539,6 +683,9 @@ def describe_poly(ctx: Scales, fit: EffectFit, units: tuple[str, str]) -> dict:
     out["normalisation"] = {"centre": c, "half_range": s, "unit": ui if side == "input" else uo,
                             "form": ("x + s*sum_j a_j z^j, z = (x - c)/s"
                                      if fit.name == "static_nonlinearity" and fit.variant == "input" else
+                                     "x_h + s*sum_j a_j z^j, z = (x_h - c)/s, x_h the hysteresis output (the map acts "
+                                     "after the hysteresis, before the dynamics)"
+                                     if fit.name == "static_nonlinearity" and fit.variant == AFTER_HYST else
                                      "y + G1(s*sum_j b_j w^j), w = (y - c)/s, G1 = G/G(0)"
                                      if fit.name == "static_nonlinearity" else
                                      "y + s*sum_j c_j w^j, w = (y - c)/s")}
