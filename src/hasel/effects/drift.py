@@ -39,7 +39,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _ls, _sse, _train_smooth, _with, bic_prefers, sumsq
+from hasel.effects.fitkit import _ls, _sse, _with, bic_prefers, sumsq
 from hasel.validate import in_range, positive
 
 __all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
