@@ -196,23 +196,42 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
     win, lose = (other, name) if switch else (name, other)
     ctx.say(f"map side with the others in place: {name} validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f}, {other} "
             f"{ctx.to_nrmse(m_ho):.4f} (block preference {pref:.1f}) -> {win}")
-    st.rounds.append({"round": len(st.rounds) + 1, "map_side_check": True, "best": win, "accepted": bool(switch),
-                      "preference": pref, "candidates": [
-                          {"name": " + ".join(k for k in st.current if k != LINEAR),
-                           "nrmse_validation": ctx.to_nrmse(st.mse_ho)},
-                          {"name": " + ".join(k for k in alt if k != LINEAR), "nrmse_validation": ctx.to_nrmse(m_ho)}]})
+    _side_round(ctx, st, alt, win, switch, pref, st.mse_ho, m_ho)
     st.ambiguous = [a for a in st.ambiguous if {a["chosen"], a["alternative"]} != {name, other}]
     if pref < ctx.opts.t_min:
-        norm = max(st.mse_nom, 1e-300)
-        st.ambiguous.append({"chosen": win, "alternative": lose,
-                             "validation_nrmse": {"chosen": ctx.to_nrmse(m_win), "alternative": ctx.to_nrmse(m_lose)},
-                             "gap_removed": {"chosen": 1.0 - m_win / norm, "alternative": 1.0 - m_lose / norm},
-                             "preference": pref, "with_others": [k for k in rest if k != LINEAR],
-                             "experiment": _SEPARATING[frozenset((name, other))]})
+        st.ambiguous.append(_side_ambiguity(ctx, st, win, lose, m_win, m_lose, pref, rest))
     if switch:
         if name in st.evidence_of:
             st.evidence_of[other] = st.evidence_of.pop(name)
         st.adopt(dict(alt), m_tr, m_ho, e_alt)
+
+
+def _side_round(ctx: _Context, st: _State, alt: dict[str, EffectFit], best: str, accepted: bool, pref: float,
+                m_cur: float, m_alt: float, after_hysteresis: bool = False) -> None:
+    """Record a map-side comparison in ``st.rounds``: the final set (validation MSE ``m_cur``) against ``alt``
+    (``m_alt``), the winner ``best`` and the held-out block preference ``pref``; ``after_hysteresis`` marks
+    (and labels) the comparison with a map of the hysteresis output."""
+    rec = {"round": len(st.rounds) + 1, "map_side_check": True}
+    if after_hysteresis:
+        rec["after_hysteresis"] = True
+    label = " (map after the hysteresis)" if after_hysteresis else ""
+    rec.update({"best": best, "accepted": bool(accepted), "preference": pref, "candidates": [
+        {"name": " + ".join(k for k in st.current if k != LINEAR), "nrmse_validation": ctx.to_nrmse(m_cur)},
+        {"name": " + ".join(k for k in alt if k != LINEAR) + label, "nrmse_validation": ctx.to_nrmse(m_alt)}]})
+    st.rounds.append(rec)
+
+
+def _side_ambiguity(ctx: _Context, st: _State, chosen: str, alternative: str, m_chosen: float, m_alt: float,
+                    pref: float, rest: dict[str, EffectFit]) -> dict:
+    """The verdict's entry for two maps the held-out blocks cannot separate: their validation NRMSE (from the
+    validation MSEs ``m_chosen``, ``m_alt``), the share of the nominal gap each removes, the preference, the
+    other effects beside them and the experiment that would separate them."""
+    norm = max(st.mse_nom, 1e-300)
+    return {"chosen": chosen, "alternative": alternative,
+            "validation_nrmse": {"chosen": ctx.to_nrmse(m_chosen), "alternative": ctx.to_nrmse(m_alt)},
+            "gap_removed": {"chosen": 1.0 - m_chosen / norm, "alternative": 1.0 - m_alt / norm},
+            "preference": pref, "with_others": [k for k in rest if k != LINEAR],
+            "experiment": _SEPARATING[frozenset((chosen, alternative))]}
 
 
 #: Rounds in which every searched effect of a set beside a hysteresis is refitted given the others (each from
@@ -325,25 +344,14 @@ def _after_hysteresis_side(ctx: _Context, st: _State, name: str) -> None:
     ctx.say(f"map after the hysteresis: {here} validation NRMSE {ctx.to_nrmse(st.mse_ho):.4f} (refitted "
             f"{ctx.to_nrmse(m_ref):.4f}), static_nonlinearity after the hysteresis {ctx.to_nrmse(m_ho):.4f} "
             f"(block preference {pref:.1f}) -> {'the map after the hysteresis' if switch else here}")
-    st.rounds.append({"round": len(st.rounds) + 1, "map_side_check": True, "after_hysteresis": True,
-                      "best": "static_nonlinearity" if switch else name, "accepted": bool(switch), "preference": pref,
-                      "candidates": [
-                          {"name": " + ".join(k for k in st.current if k != LINEAR),
-                           "nrmse_validation": ctx.to_nrmse(m_ref)},
-                          {"name": " + ".join(k for k in alt if k != LINEAR) + " (map after the hysteresis)",
-                           "nrmse_validation": ctx.to_nrmse(m_ho)}]})
+    _side_round(ctx, st, alt, "static_nonlinearity" if switch else name, switch, pref, m_ref, m_ho,
+                after_hysteresis=True)
     if not switch:
         return
     if name != "static_nonlinearity":
         st.ambiguous = [a for a in st.ambiguous if {a["chosen"], a["alternative"]} != {name, "static_nonlinearity"}]
         if pref < ctx.opts.t_min:
-            norm = max(st.mse_nom, 1e-300)
-            st.ambiguous.append({"chosen": "static_nonlinearity", "alternative": name,
-                                 "validation_nrmse": {"chosen": ctx.to_nrmse(m_ho),
-                                                      "alternative": ctx.to_nrmse(m_ref)},
-                                 "gap_removed": {"chosen": 1.0 - m_ho / norm, "alternative": 1.0 - m_ref / norm},
-                                 "preference": pref, "with_others": [k for k in rest if k != LINEAR],
-                                 "experiment": _SEPARATING[frozenset((name, "static_nonlinearity"))]})
+            st.ambiguous.append(_side_ambiguity(ctx, st, "static_nonlinearity", name, m_ho, m_ref, pref, rest))
         if name in st.evidence_of:
             st.evidence_of["static_nonlinearity"] = st.evidence_of.pop(name)
     st.adopt(dict(alt), m_tr, m_ho, e_alt)
