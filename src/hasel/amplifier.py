@@ -184,13 +184,13 @@ class AmplifierCore:
         self.watchdog.feed(now_s)
         self.tripped = False
 
-    def _out(self, applied: Applied, now_s: float) -> tuple[Applied, Notice | None]:
+    def _out(self, applied: Applied, now_s: float, **extra: float) -> tuple[Applied, Notice | None]:
         self.output_kv = applied.applied_kv
         reason, notice = applied.reason, None
         if reason != self.last_reason and reason not in (Reason.NONE, Reason.PRECONDITION):
             level = ERROR if reason in (Reason.WATCHDOG, Reason.NONFINITE) else WARN
             notice = Notice(level, f"output limited: {Reason.NAMES[reason]}", now_s,
-                            {"requested_kv": applied.requested_kv, "applied_kv": applied.applied_kv})
+                            {"requested_kv": applied.requested_kv, "applied_kv": applied.applied_kv, **extra})
         self.last_reason = reason
         return applied, notice
 
@@ -226,11 +226,16 @@ class AmplifierCore:
                                 "max_requested_kv": float(np.nanmax(np.where(np.isfinite(req), req, 0)))})
 
     def poll(self, now_s: float) -> tuple[Applied, Notice | None] | None:
-        """The watchdog at ``now_s``: 0 kV (``WATCHDOG``) once commands are stale, else None."""
+        """The watchdog at ``now_s``: 0 kV (``WATCHDOG``) once commands are stale, else None.
+
+        The notice of a trip carries ``command_age_s``: the time since the last command
+        arrived, s, on this clock (how late the watchdog acted, apart from the latency of
+        the chain upstream, which the commands' stamps include).
+        """
         if self.watchdog.last_s is None or not self.watchdog.expired(now_s) or now_s == self._tripped_at_s:
             return None  # fresh, never fed, or this instant's 0 kV already sent
         self.tripped, self._tripped_at_s = True, now_s
-        return self._out(Applied(math.nan, 0.0, Reason.WATCHDOG), now_s)
+        return self._out(Applied(math.nan, 0.0, Reason.WATCHDOG), now_s, command_age_s=now_s - self.watchdog.last_s)
 
     def shutdown(self, now_s: float) -> tuple[Applied, Notice | None]:
         """0 kV on the way out (``SHUTDOWN``)."""

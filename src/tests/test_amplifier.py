@@ -90,6 +90,7 @@ def test_amplifier_watchdog_zero_kv_once_commands_stop_and_the_first_command_of_
     assert amp.poll(1.015) is None  # three periods: still fresh
     out, note = amp.poll(1.020)
     assert out.applied_kv == 0.0 and out.reason == Reason.WATCHDOG and note.level == ERROR and amp.tripped
+    assert note.values["command_age_s"] == pytest.approx(0.020)  # how late, from the last arrival
     assert amp.poll(1.020) is None  # once per instant
     assert amp.poll(1.025)[0].reason == Reason.WATCHDOG  # then every period
     # a request at an instant whose 0 kV was not sent yet: the watchdog's output comes first
