@@ -40,3 +40,18 @@ def test_a_declared_command_whose_package_is_missing_asks_for_make_setup(monkeyp
     assert cli.main(["ghost", "--anything", "x"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["hasel ghost: needs the built ROS workspace (hasel_ros not found); run `make setup`"]
+
+
+def test_every_command_runs_with_one_blas_thread_unless_the_user_set_one(tmp_path):
+    # the thread count changes the order of BLAS sums, hence results in their last digits (README: make demo)
+    code = ("import os\nfrom hasel.cli import main\n"
+            "main(['identify', {missing!r}])\n"
+            "print('THREADS', os.environ.get('OPENBLAS_NUM_THREADS'), os.environ.get('OMP_NUM_THREADS'))\n")
+    missing = str(tmp_path / "no_such_log.csv")
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("PYTHONPATH", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    for env, want in ((base, "THREADS 1 1"), ({**base, "OPENBLAS_NUM_THREADS": "3"}, "THREADS 3 1")):
+        p = subprocess.run([sys.executable, "-c", code.format(missing=missing)], capture_output=True, text=True,
+                           env=env, timeout=60)
+        assert want in p.stdout, (p.stdout, p.stderr)
+        assert "no_such_log" in p.stderr  # the command did run (and refused the missing file)
