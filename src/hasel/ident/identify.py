@@ -766,18 +766,19 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
         # tuning logs (bench/tune_ident/RESULT_h-ident5.md) the held-out test turned 6 kept offsets into ties, the
         # standard error 2 more
         t_stat, k_runs, t_crit = heldout_preference(y, oe0.y_hat, oe.y_hat, pieces.heldout)
-        se = (shift_standard_error(oe, u, y, rate, pieces, hold=opts.input_hold, block=block, max_shift=max_shift,
-                                   drift_s=opts.drift_knot_s) if t_stat >= t_crit else float("nan"))
+        se = shift_standard_error(oe, u, y, rate, pieces, hold=opts.input_hold, block=block, max_shift=max_shift,
+                                  drift_s=opts.drift_knot_s)
         pinned = math.isfinite(se) and abs(oe.shift) >= _CONVENTION_Z * se
-        if t_stat >= t_crit and pinned:
+        against = math.isfinite(t_stat) and t_stat <= -t_crit
+        if pinned and not against:
             notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                          f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
-                         f"in-band disagreement {c_free:.3g} against {c_zero:.3g}; the held-out blocks prefer it "
-                         f"(paired t {t_stat:.3g} over {k_runs} blocks, above {t_crit:.3g}) and the estimate is "
-                         f"{abs(oe.shift) / se:.2g} standard errors from none")
+                         f"in-band disagreement {c_free:.3g} against {c_zero:.3g}; the estimate is "
+                         f"{abs(oe.shift) / se:.2g} standard errors from none and the held-out blocks do not prefer "
+                         f"the fit without it (paired t {t_stat:.3g} over {k_runs} blocks, {-t_crit:.3g} would)")
             return oe, None, False
-        why = (f"the held-out blocks do not prefer it beyond noise (paired t {t_stat:.3g} over {k_runs} blocks, "
-               f"{t_crit:.3g} needed)" if t_stat < t_crit or not math.isfinite(t_stat) else
+        why = (f"the held-out blocks prefer the fit without it (paired t {t_stat:.3g} over {k_runs} blocks, "
+               f"{-t_crit:.3g} or below)" if against else
                f"the estimate is within {_CONVENTION_Z:g} standard errors of none (+-{1e3 * se / rate:.2g} ms)")
         notes.append(f"no timing offset between input and output: the estimate ({-ms:+.3g} ms) changes the held-out "
                      f"model error from {e_zero:.3g} to {e_free:.3g} and the in-band disagreement from {c_zero:.3g} "
