@@ -1,8 +1,9 @@
 """Tally T (true members named), S (names not in the truth), FA (effect-free logs with a name), seconds per set.
-usage: python bench/tune_diag/tally.py OUTDIR [OUTDIR2 ...] (outputs of runsets.sh)  (prints a side-by-side table when two are given)"""
+usage: [TALLY_SETS="a b"] python bench/tune_diag/tally.py OUTDIR [OUTDIR2 ...] (outputs of runsets.sh)  (prints a side-by-side table when two are given)"""
 import json, os, sys
 
-SETS = "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes".split()
+SETS = (os.environ.get("TALLY_SETS") or  # other set names (the held-back sets' folders, say); names free* are effect-free
+        "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes").split()
 
 def as_set(x):
     """Effect names of a truth or verdict field (list, comma string, dict or 'none') as a set."""
@@ -33,17 +34,22 @@ def tally(out, s):
         sec += float(r.get("seconds", 0) or 0)
     return dict(n=len(rows), T=T, S=S, FA=FA, nfree=nfree, sec=sec)
 
-outs = sys.argv[1:]
-tot = [dict(T=0, S=0, FA=0, sec=0.0) for _ in outs]
-print(f"{'set':14s}" + "".join(f" | {os.path.basename(o.rstrip('/')):>30s}" for o in outs))
-for s in SETS:
-    cells = []
-    for i, o in enumerate(outs):
-        t = tally(o, s)
-        if t is None:
-            cells.append(f"{'-':>30s}"); continue
-        for k in ("T", "S", "FA", "sec"):
-            tot[i][k] += t[k]
-        cells.append(f"{'n%d T%d S%d FA%d/%d %5.0fs' % (t['n'], t['T'], t['S'], t['FA'], t['nfree'], t['sec']):>30s}")
-    print(f"{s:14s}" + "".join(" | " + c for c in cells))
-print(f"{'total':14s}" + "".join(f" | {'T%d S%d FA%d %6.0fs' % (t['T'], t['S'], t['FA'], t['sec']):>30s}" for t in tot))
+def main(outs: list[str]) -> None:
+    """Print the side-by-side table of the runs ``outs``."""
+    tot = [dict(T=0, S=0, FA=0, sec=0.0) for _ in outs]
+    print(f"{'set':14s}" + "".join(f" | {os.path.basename(o.rstrip('/')):>30s}" for o in outs))
+    for s in SETS:
+        cells = []
+        for i, o in enumerate(outs):
+            t = tally(o, s)
+            if t is None:
+                cells.append(f"{'-':>30s}"); continue
+            for k in ("T", "S", "FA", "sec"):
+                tot[i][k] += t[k]
+            cells.append(f"{'n%d T%d S%d FA%d/%d %5.0fs' % (t['n'], t['T'], t['S'], t['FA'], t['nfree'], t['sec']):>30s}")
+        print(f"{s:14s}" + "".join(" | " + c for c in cells))
+    print(f"{'total':14s}" + "".join(f" | {'T%d S%d FA%d %6.0fs' % (t['T'], t['S'], t['FA'], t['sec']):>30s}" for t in tot))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
