@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from hasel.diagnose.augment import LINEAR, EffectFit, fit_drift_on_repeats, fit_family, joint_refine, linear_static, measured_clip
-from hasel.diagnose.context import _Context, drift_beside_map, _fixed, _pick, _raises, _State, _without, raised_resonance
+from hasel.diagnose.context import _Context, _fixed, _pick, _raises, _State, _without, raised_resonance
 from hasel.diagnose.significance import _SEPARATING, block_test
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.static_map import AFTER_HYST, AFTER_HYST_KNEE, fit_after_hysteresis, is_after_hysteresis
@@ -489,8 +489,7 @@ def _backward_check(ctx: _Context, st: _State) -> None:
             refit, m_tr_r, m_ho_r, e_r = _refit_rest(ctx, rest)
             gain = _gain_without(st, m_ho_r)
             t_blk, z_col = ctx.held_out(e_r, st.e_ho)
-            z_counts = not (opts.drift_map_block_only and drift_beside_map(st.current, [name]))
-            ok = gain >= opts.min_next_gain and (t_blk >= opts.t_min or (z_counts and z_col >= opts.zc_min))
+            ok = gain >= opts.min_next_gain and (t_blk >= opts.t_min or z_col >= opts.zc_min)
             _backward_round(ctx, st, name, refit, m_ho_r, ok, t_block=t_blk, z_coloured=z_col)
             ctx.say(f"backward check: {name} given the others refitted removes {100 * gain:.1f} % (held-out block "
                     f"score {t_blk:.1f}, coloured-noise z {z_col:.1f}) -> {'kept' if ok else 'fails'}")

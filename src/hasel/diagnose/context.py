@@ -206,17 +206,3 @@ def _pick(results: list[Candidate]) -> Candidate:
                                                           and _PRIOR[r[2]] < _PRIOR[best[2]])):
             best = r
     return best
-
-
-def drift_beside_map(effects: dict, changed: list[str] | tuple[str, ...]) -> bool:
-    """True when ``effects`` hold a ``charge_drift`` and a level map (static or sensor) and ``changed`` names one.
-
-    The two trade against each other where the level changes slowly (a map fitted first holds the
-    drift's mean; a drift fitted beside a map takes the map's slow misfit); see
-    ``DiagnoseOptions.drift_map_block_only``.
-    """
-    from hasel.effects.drift import LEVEL_CARRIERS
-
-    pair = ("charge_drift",) + tuple(LEVEL_CARRIERS)
-    return ("charge_drift" in effects and any(k in effects for k in LEVEL_CARRIERS)
-            and any(n in pair for n in changed))

@@ -55,7 +55,7 @@ from hasel.diagnose.augment import (FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pip
                                     joint_refine, linear_static, make_linear, split_linear)
 from hasel.diagnose.checks import (_MAP_SIDES, _backward_check, _clip_check, _joint_refine_stage, _map_side_stage,
                                    _repeat_check)
-from hasel.diagnose.context import (drift_beside_map, Candidate, _Context, _fixed, _pick, _raises, _start_state, _State, _without,
+from hasel.diagnose.context import (Candidate, _Context, _fixed, _pick, _raises, _start_state, _State, _without,
                                     raised_resonance)
 from hasel.diagnose.options import DiagnoseOptions, DiagnosisFailed, Verdict
 from hasel.diagnose.pool import jobs as pool_jobs
@@ -450,10 +450,8 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all) or (
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
+    held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
     new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
-    # a drift and a level map trade against each other: the pair's fast-part gain is the map's refit (options)
-    z_counts = not (opts.drift_map_block_only and drift_beside_map(eff_new, new_names))
-    held_out_ok = t_blk >= opts.t_min or (z_counts and z_col >= opts.zc_min)
     # a map (static or sensor) says the output error depends on the level; slow sensor wander depends on time,
     # and where the level changes slowly with time (offsets stepped in turn, a warm-up) a map fits the wander,
     # and the interleaved held-out blocks, which share the wander with their training neighbours, credit it.

@@ -233,14 +233,6 @@ class DiagnoseOptions:
         case 3: block score 4.17, coloured z 2.44, fast part 1.58), so 1.0 sits between the two; no round of the
         tuning runs (free_indep 11-13, ``cases.py`` seed 7, ``maps.py`` seed 41, ``free_noise.py`` seed 3) fell
         between 1.0 and 1.645, so those results are the same at either value (``bench/tune_diag/RESULT-h-free2.md``).
-    drift_map_block_only : bool
-        A ``charge_drift`` beside a level map (static or sensor), or such a map beside a drift, passes the held-out
-        test on the block score (``t_min``) only, not on the coloured z: in the forward rounds and in the backward
-        check. The drift is fitted beside the map with the map refitted in turn (the map then gives up the level
-        the drift takes), so the pair's improvement on the fast parts, which the coloured z measures, is the map's
-        refit rather than the drift [design, no new threshold; tuning: ``maps.py`` seed 41 map_19 (a knee beside an
-        asymmetric lag, closed-loop steps) named a spurious drift on the coloured z alone (4.1, block score 0.9,
-        backward check z 4.2 / block 0.6); ``bench/tune_diag/RESULT-h-drblk.md``].
     """
 
     max_effects: int = 3
@@ -291,7 +283,6 @@ class DiagnoseOptions:
     max_order: int = 4
     progress: Callable[[str], None] | None = None
     map_fast_t_min: float = 1.0
-    drift_map_block_only: bool = True
 
 
 @dataclass
