@@ -82,4 +82,3 @@ def test_map_alone_gets_no_drift():
     v, _ = _diagnose(False)
     assert "charge_drift" not in v.names
     assert "static_nonlinearity" in v.names or "sensor_nonlinearity" in v.names
-
