@@ -117,8 +117,8 @@ def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
     probe.wait(lambda: any("watchdog" in d for d in probe.diags), 10, "the watchdog's diagnostic")
     # stale after three periods; the watchdog acts at its next period (plus scheduling jitter).
     # Measured on the amplifier's clock from its last command's arrival: the commands' stamps are
-    # the measurements' times, so stamp gaps add the chain's latency, which a loaded machine
-    # stretched to 1 s once without the watchdog being late.
+    # the measurements' times, so stamp gaps add the chain's latency (a likely reading of a 1 s gap
+    # seen once on a loaded machine; it did not reproduce).
     age = float(next(v for d, v in zip(probe.diags, probe.values) if "watchdog" in d)["command_age_s"])
     assert 3 * 0.005 < age <= 5 * 0.005 + 0.01
     # (no comparison of stamps across the trip: a command carries its measurement's stamp, which in a fresh-clone run

@@ -15,19 +15,33 @@ def as_set(x):
         return set(x)
     return set(x)
 
-def tally(out, s):
-    """Counts of set ``s`` in runsets.sh's ``out``: cases, T, S, FA, effect-free logs, seconds (sum of per-case s)."""
+def load_rows(out, s):
+    """The result rows of set ``s`` in runsets.sh's ``out`` (None when the set was not run)."""
     p = os.path.join(out, s, "results.json")
     if not os.path.exists(p):
         return None
     d = json.load(open(p))
-    rows = d["rows"] if isinstance(d, dict) and "rows" in d else d
+    return d["rows"] if isinstance(d, dict) and "rows" in d else d
+
+
+def truth_of(r, s):
+    """The true effect names of row ``r`` of set ``s`` (none in the effect-free sets, free*)."""
+    return set() if s.startswith("free") else as_set(r["labels"] if "labels" in r else r.get("truth", r.get("true", [])))
+
+
+def names_of(r):
+    """The effect names the diagnosis gave in row ``r``."""
+    return as_set(r.get("names", r.get("named", [])))
+
+
+def tally(out, s):
+    """Counts of set ``s`` in runsets.sh's ``out``: cases, T, S, FA, effect-free logs, seconds (sum of per-case s)."""
+    rows = load_rows(out, s)
+    if rows is None:
+        return None
     T = S = FA = nfree = 0; sec = 0.0
     for r in rows:
-        truth = as_set(r["labels"] if "labels" in r else r.get("truth", r.get("true", [])))
-        names = as_set(r.get("names", r.get("named", [])))
-        if s.startswith("free"):
-            truth = set()
+        truth, names = truth_of(r, s), names_of(r)
         T += len(names & truth); S += len(names - truth)
         if not truth:
             nfree += 1; FA += bool(names)

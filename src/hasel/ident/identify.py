@@ -767,10 +767,12 @@ def _timing_or_not(oe: Any, u: np.ndarray, y: np.ndarray, rate: float, pieces: A
         # 10 blocks) and four pinned offsets (>= 2 sd) were lost, those models 3.5-4.2 deg off P(s) instead of
         # 1.7-2.4 (bench/tune_ident/RESULT_h-pin.md)
         t_stat, k_runs, t_crit = heldout_preference(y, oe0.y_hat, oe.y_hat, pieces.heldout)
-        se = shift_standard_error(oe, u, y, rate, pieces, hold=opts.input_hold, block=block, max_shift=max_shift,
-                                  drift_s=opts.drift_knot_s)
-        pinned = math.isfinite(se) and abs(oe.shift) >= _CONVENTION_Z * se
         against = math.isfinite(t_stat) and t_stat <= -t_crit
+        # the standard error costs a covariance: not needed once the held-out blocks reject the offset
+        se = (float("nan") if against else
+              shift_standard_error(oe, u, y, rate, pieces, hold=opts.input_hold, block=block, max_shift=max_shift,
+                                   drift_s=opts.drift_knot_s))
+        pinned = math.isfinite(se) and abs(oe.shift) >= _CONVENTION_Z * se
         if pinned and not against:
             notes.append(f"timing offset between input and output estimated ({-ms:+.3g} ms, a sampling convention, "
                          f"not dynamics): held-out model error {e_free:.3g} with it, {e_zero:.3g} without; "
