@@ -2,19 +2,20 @@
 from __future__ import annotations
 
 import math
-import threading
+import time
 
 import numpy as np
 import pytest
 import rclpy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rcl_interfaces.srv import SetParameters
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
 from hasel_control.amplifier_node import HvAmplifierNode
-from hasel_ros.rosutil import topic_qos
+from hasel_ros.rosutil import to_stamp, topic_qos
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
 
@@ -132,3 +133,60 @@ def test_shutdown_commands_zero_kv(harness):
         if harness.got[-1].reason == VoltageCommand.REASON_SHUTDOWN:
             break
     assert harness.got[-1].applied_kv == 0.0 and harness.got[-1].reason == VoltageCommand.REASON_SHUTDOWN
+
+
+def test_requests_queued_while_the_node_was_starved_do_not_outlive_the_watchdog():
+    """The node starved of CPU past its watchdog timeout (as on a loaded machine when the controller
+    dies): its executor takes the ready timer first, sends 0 kV, then finds the requests that queued
+    meanwhile. They were measured before the trip and stay at 0 kV; the first request measured after
+    the trip resumes. The executor is ``ros2 run``'s (SingleThreadedExecutor), on wall time."""
+    ctx = Context()
+    rclpy.init(context=ctx)
+    amp = HvAmplifierNode(context=ctx)
+    node = rclpy.create_node("starve_probe", context=ctx)
+    pub = node.create_publisher(VoltageCommand, "/amp/command", topic_qos("/amp/command"))
+    got: list[VoltageCommand] = []
+    diags: list[str] = []
+    node.create_subscription(VoltageCommand, "/amp/applied", got.append, topic_qos("/amp/applied"))
+    node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diags.extend(x.message for x in m.status),
+                             topic_qos("/diagnostics"))
+    ex_amp, ex_probe = SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=ctx)
+    ex_amp.add_node(amp)
+    ex_probe.add_node(node)
+
+    def spin(until, what: str) -> None:
+        for _ in range(500):
+            ex_amp.spin_once(timeout_sec=0.0)
+            ex_probe.spin_once(timeout_sec=0.002)
+            if until():
+                return
+        raise AssertionError(f"timed out waiting for {what}: got {[(m.applied_kv, m.reason) for m in got]}")
+
+    try:
+        spin(lambda: pub.get_subscription_count() and amp.applied_pub.get_subscription_count(), "discovery")
+        def send(kv: float) -> None:  # stamped as the measurement it answers, on wall time like the plant's
+            msg = VoltageCommand(requested_kv=kv)
+            msg.header.stamp = to_stamp(time.time())
+            pub.publish(msg)
+
+        send(4.0)
+        spin(lambda: any(m.applied_kv == 4.0 for m in got), "the first request")
+        n0 = len(got)
+        for kv in (5.0, 6.0):  # sent, then the amplifier gets no CPU for 40 ms (timeout 15 ms)
+            send(kv)
+        time.sleep(0.04)
+        spin(lambda: sum(m.requested_kv in (5.0, 6.0) for m in got[n0:]) == 2, "the queued requests")
+        after = [(m.applied_kv, m.reason) for m in got[n0:]]
+        assert after[0] == (0.0, VoltageCommand.REASON_WATCHDOG)  # the trip first (timers before subscriptions)
+        assert all(kv == 0.0 and r == VoltageCommand.REASON_WATCHDOG for kv, r in after), after
+        assert amp.tripped and amp.output_kv == 0.0
+        spin(lambda: any("measured before the watchdog tripped" in d for d in diags), "the dropped request's notice")
+        send(7.0)  # measured after the trip: control resumes
+        spin(lambda: any(m.applied_kv == 7.0 for m in got), "the fresh request")
+        assert next(m.reason for m in got if m.applied_kv == 7.0) == VoltageCommand.REASON_NONE
+    finally:
+        ex_amp.shutdown()
+        ex_probe.shutdown()
+        amp.destroy_node()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)

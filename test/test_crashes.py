@@ -40,10 +40,11 @@ class Probe:
         self.ctx = Context()
         rclpy.init(context=self.ctx)
         self.node = rclpy.create_node("crash_probe", context=self.ctx)
-        self.applied: list[tuple[float, float, int]] = []
+        self.applied: list[tuple[float, float, int]] = []  # (stamp s, applied kV, reason) in publication order
         self.states: list[ControllerState] = []
         self.diags: list[str] = []
         self.values: list[dict[str, str]] = []  # each diagnostic's key/values, beside its message
+        self.diag_stamps: list[float] = []  # and its stamp, s (the amplifier's clock for its own trips)
         # a deep reader queue: on a loaded machine the probe may lag, and nothing may be lost
         deep = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
         self.node.create_subscription(VoltageCommand, "/amp/applied", lambda m: self.applied.append(
@@ -57,6 +58,7 @@ class Probe:
         for st in msg.status:
             self.diags.append(st.message)
             self.values.append({kv.key: kv.value for kv in st.values})
+            self.diag_stamps.append(from_stamp(msg.header.stamp))
 
     def spin(self, seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -110,21 +112,35 @@ def running(probe: Probe, since: float = 0.0) -> bool:
 def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
     procs, probe = loop
     probe.wait(lambda: running(probe), 60, "the loop to run")
+    # the amplifier stamps its own trips with its clock, the wall clock of this machine: a trip stamped after the
+    # kill is the kill's (a loaded machine may trip and resume before it, and the probe may receive that late)
+    t_kill = time.time()
     procs["controller"].send_signal(signal.SIGKILL)
     procs["controller"].wait()
-    probe.wait(lambda: any(r == VoltageCommand.REASON_WATCHDOG for _, _, r in probe.applied), 10,
-               "the amplifier's watchdog")
-    probe.wait(lambda: any("watchdog" in d for d in probe.diags), 10, "the watchdog's diagnostic")
+
+    def trip() -> int | None:  # index of the amplifier's first 0 kV after the kill
+        return next((i for i, (t, _, r) in enumerate(probe.applied) if r == VoltageCommand.REASON_WATCHDOG
+                     and t > t_kill), None)
+
+    def trip_diag() -> int | None:
+        return next((i for i, (d, t) in enumerate(zip(probe.diags, probe.diag_stamps)) if "limited: watchdog" in d
+                     and t > t_kill), None)
+
+    probe.wait(lambda: trip() is not None, 10, "the amplifier's watchdog")
+    probe.wait(lambda: trip_diag() is not None, 10, "the watchdog's diagnostic")
     # stale after three periods; the watchdog acts at its next period (plus scheduling jitter).
     # Measured on the amplifier's clock from its last command's arrival: the commands' stamps are
     # the measurements' times, so stamp gaps add the chain's latency (a likely reading of a 1 s gap
     # seen once on a loaded machine; it did not reproduce).
-    age = float(next(v for d, v in zip(probe.diags, probe.values) if "watchdog" in d)["command_age_s"])
+    age = float(probe.values[trip_diag()]["command_age_s"])
     assert 3 * 0.005 < age <= 5 * 0.005 + 0.01
-    # (no comparison of stamps across the trip: a command carries its measurement's stamp, which in a fresh-clone run
-    # stood 26 ms after the amplifier's own trip time; the amplifier's clock and the age above are what it acts on)
     probe.spin(0.1)
-    assert probe.applied[-1][1] == 0.0
+    # nothing after the trip but 0 kV: requests of the dead controller still queued at the amplifier (it may be
+    # starved on a loaded machine, and handles its timer first) were measured before the trip and are dropped
+    # (test_amplifier_node reproduces that case; the command stamped 26 ms after a trip in one session-16 run was
+    # more likely applied after an earlier trip of a loaded machine, which the old test took for the kill's)
+    after = probe.applied[trip():]
+    assert all(kv == 0.0 for _, kv, _ in after), after[:5]
     t_restart = probe.applied[-1][0]
     procs["controller"] = start("controller")
     probe.wait(lambda: running(probe, t_restart), 60, "control to resume after the restart")

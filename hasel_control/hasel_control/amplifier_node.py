@@ -4,7 +4,8 @@ It turns requests into the command the 5 kV/V amplifier receives, under the rule
 :mod:`hasel.amplifier`: a hard 9 kV ceiling no parameter can raise (parameters above
 it are rejected with the reason), non-finite requests give 0 kV, requests are clamped
 to [v_min_kv, v_max_kv], no fresh request for more than ``watchdog_periods`` loop
-periods gives 0 kV, and shutdown commands 0 kV. It publishes every applied command on
+periods gives 0 kV, requests that were already queued when that 0 kV was sent (the node
+starved of CPU, their sender perhaps dead) are dropped, and shutdown commands 0 kV. It publishes every applied command on
 ``/amp/applied`` (or ``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a
 ``diagnostic_msgs`` status whenever the clamp or the watchdog acts.
 
@@ -17,13 +18,14 @@ messages into core calls and the results into messages.
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from hasel import paper
-from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, Watchdog
+from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, Applied, HvLimits, TripMark, Watchdog
 from hasel.faults import Notice
 from hasel_ros.rosutil import (Deadline, declare, diagnostic, float64_array, from_stamp, now_s, run_node, to_stamp,
                                topic_qos, validate_with)
@@ -45,6 +47,7 @@ class HvAmplifierNode(Node):
         periods = declare(self, "watchdog_periods", 3.0, "periods without a command before 0 kV",
                           lo=1.0, hi=10.0)
         self.core = AmplifierCore(HvLimits(v_min, v_max), Watchdog(self.period_s, periods))
+        self.trip_mark = TripMark()  # requests queued behind a trip are stale (see TripMark)
         self.add_on_set_parameters_callback(validate_with(self._on_params))
         self.applied_pub = self.create_publisher(VoltageCommand, "amp/applied", topic_qos("/amp/applied"))
         self._applied = VoltageCommand()
@@ -107,18 +110,33 @@ class HvAmplifierNode(Node):
             self.diag_pub.publish(diagnostic(self, bytes([notice.level]), notice.message, from_stamp(stamp),
                                              **notice.values))
 
-    def on_command(self, msg: VoltageCommand) -> None:
-        """A 200 Hz request from the controller: limit it and pass it on with its stamp."""
-        now = self._now()
-        results = self.core.command(now, msg.requested_kv)
+    def _fed(self, now: float | None = None, stamp=None) -> None:
+        """A request was taken: the deadline pushed back; a request's own time (``now``, s) and ``stamp``
+        become the reference of the next trip's mark."""
         self.deadline.feed()
+        if now is not None:
+            self.trip_mark.fed(now, from_stamp(stamp))
+        else:
+            self.trip_mark.clear()
+
+    def on_command(self, msg: VoltageCommand) -> None:
+        """A 200 Hz request from the controller: limit it and pass it on with its stamp.
+
+        After a watchdog trip this node sent, a request measured before the trip (see :class:`TripMark`)
+        is dropped: 0 kV, the watchdog not fed. It queued while the node was starved."""
+        now = self._now()
+        if self.core.tripped and self.trip_mark.queued(from_stamp(msg.header.stamp), time.monotonic_ns()):
+            self._publish(msg.header.stamp, self.core.queued_request(now, msg.requested_kv))
+            return
+        results = self.core.command(now, msg.requested_kv)
+        self._fed(now, msg.header.stamp)
         if len(results) > 1:  # the watchdog's 0 kV fell due at this instant: it goes first
             self._publish(to_stamp(now), results[0])
         self._publish(msg.header.stamp, results[-1])
 
     def on_batch(self, msg: SampleBatch) -> None:
         """An open-loop 10 kHz request: every sample limited (NaN/inf -> 0 kV)."""
-        self.deadline.feed()
+        self._fed()
         applied, notice = self.core.batch(self._now(), msg.voltage_kv)
         self.batch_pub.publish(SampleBatch(header=msg.header, sample_period_s=msg.sample_period_s,
                                            voltage_kv=float64_array(applied)))
@@ -126,7 +144,7 @@ class HvAmplifierNode(Node):
 
     def on_precondition(self, msg: VoltageCommand) -> None:
         """The deliberate charge reversal (bounded to [-2, 0] kV)."""
-        self.deadline.feed()
+        self._fed()
         self._publish(msg.header.stamp, self.core.precondition(self._now(), msg.requested_kv))
 
     def on_watchdog(self) -> None:
@@ -134,6 +152,7 @@ class HvAmplifierNode(Node):
         now = self._now()
         result = self.core.poll(now)
         if result is not None:
+            self.trip_mark.trip(now, time.monotonic_ns())
             self._publish(to_stamp(now), result)
 
     def on_shutdown(self) -> None:

@@ -33,7 +33,7 @@ from hasel.faults import ERROR, WARN, Notice
 from hasel.validate import finite, positive
 
 __all__ = ["HARD_CEILING_KV", "PRECONDITION_MIN_KV", "Reason", "HvLimits", "Applied", "Watchdog",
-           "AmplifierCore", "HeldOutput"]
+           "AmplifierCore", "TripMark", "HeldOutput"]
 
 HARD_CEILING_KV = paper.V_MAX_KV
 PRECONDITION_MIN_KV = -2.0
@@ -179,10 +179,12 @@ class AmplifierCore:
         self.last_reason = Reason.NONE
         self.tripped = False
         self._tripped_at_s: float | None = None
+        self._dropped = 0  # queued requests dropped since the last trip (see queued_request)
 
     def _feed(self, now_s: float) -> None:
         self.watchdog.feed(now_s)
         self.tripped = False
+        self._dropped = 0
 
     def _out(self, applied: Applied, now_s: float, **extra: float) -> tuple[Applied, Notice | None]:
         self.output_kv = applied.applied_kv
@@ -237,9 +239,74 @@ class AmplifierCore:
         self.tripped, self._tripped_at_s = True, now_s
         return self._out(Applied(math.nan, 0.0, Reason.WATCHDOG), now_s, command_age_s=now_s - self.watchdog.last_s)
 
+    def queued_request(self, now_s: float, requested_kv: float) -> tuple[Applied, Notice | None]:
+        """A request (kV) measured before the watchdog's trip was sent, handled after it.
+
+        It waited in the node's queue while the node was starved: had it been handled in time, the trip
+        would not have happened; handled now it is as stale as the trip said (its sender may be dead). It
+        gives 0 kV (``WATCHDOG``) and does not feed the watchdog; a WARN notice says so at the first
+        one after each trip (see :class:`TripMark`, which decides what counts as measured before)."""
+        first = not self._dropped
+        self._dropped += 1
+        req = _finite_or_none(requested_kv)
+        out, _ = self._out(Applied(math.nan if req is None else req, 0.0, Reason.WATCHDOG), now_s)
+        if not first:
+            return out, None
+        return out, Notice(WARN, "stale command dropped: measured before the watchdog tripped", now_s,
+                           {"requested_kv": out.requested_kv, "applied_kv": 0.0})
+
     def shutdown(self, now_s: float) -> tuple[Applied, Notice | None]:
         """0 kV on the way out (``SHUTDOWN``)."""
         return self._out(Applied(math.nan, 0.0, Reason.SHUTDOWN), now_s)
+
+
+class TripMark:
+    """Which requests were measured before the watchdog's trip was sent: those are stale.
+
+    A node starved of CPU for longer than the watchdog's timeout handles its timer first (rclpy's
+    executors take ready timers before ready subscriptions), sends the trip's 0 kV, and then the
+    requests that queued meanwhile, the last of them perhaps sent by a controller that has since
+    died: applied, they would put a stale voltage back on the actuator for another timeout.
+
+    Decided on the requests' stamps (the time of the measurement they answer), with no
+    assumption that the stamps' clock is this node's: the last request fed before the trip was
+    measured at ``s`` and arrived at ``t`` (node clock); its latency ``t - s`` puts the trip,
+    sent at ``T``, at ``T - (t - s)`` on the stamps' clock, and a request stamped before that
+    was measured before the trip. Only the two clocks' rates need to agree (one machine, or
+    simulated time everywhere), not their offsets. Every executor gives the stamp (rclpy's
+    EventsExecutor has no reception time). Two guards keep it from holding 0 kV on a fresh
+    request: an unset stamp (0) counts as fresh, and so does any request handled more than
+    ``window_s`` (s, monotonic clock) after the trip.
+    """
+
+    def __init__(self, window_s: float = 1.0) -> None:
+        self.window_ns = int(positive("window_s", window_s) * 1e9)
+        self._last: tuple[float, float] | None = None  # (arrival, node clock s; stamp s) of the last fed request
+        self.trip_stamp_s: float | None = None  # the trip on the stamps' clock, s
+        self._trip_mono_ns = 0
+
+    def fed(self, now_s: float, stamp_s: float) -> None:
+        """A request stamped ``stamp_s`` was applied at ``now_s`` (s): the latency reference; no trip pending."""
+        self.clear()
+        if stamp_s > 0.0:
+            self._last = (float(now_s), float(stamp_s))
+
+    def clear(self) -> None:
+        """A request was applied (a waveform, a pre-conditioning): no trip pending."""
+        self.trip_stamp_s = None
+
+    def trip(self, now_s: float, mono_ns: int) -> None:
+        """The watchdog's trip was sent at ``now_s`` (node clock, s) / ``mono_ns`` (monotonic, ns). Repeats
+        of the 0 kV while still tripped keep the first mark."""
+        if self.trip_stamp_s is None and self._last is not None:
+            arrived, stamp = self._last
+            self.trip_stamp_s, self._trip_mono_ns = now_s - (arrived - stamp), int(mono_ns)
+
+    def queued(self, stamp_s: float, mono_ns: int) -> bool:
+        """True when a request stamped ``stamp_s`` (s), handled at ``mono_ns`` (monotonic, ns), was measured
+        before the trip was sent."""
+        return (self.trip_stamp_s is not None and 0.0 < stamp_s < self.trip_stamp_s
+                and int(mono_ns) - self._trip_mono_ns <= self.window_ns)
 
 
 class HeldOutput:

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, HeldOutput, HvLimits, Reason, Watchdog
+from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, HeldOutput, HvLimits, Reason, TripMark, Watchdog
 from hasel.errors import UnsafeParameterError
 from hasel.faults import ERROR, WARN
 
@@ -112,3 +112,30 @@ def test_held_output_holds_three_periods_then_zero():
     assert [dac.missing() for _ in range(5)] == [6.0, 6.0, 6.0, 0.0, 0.0]
     assert dac.fresh(math.inf) == 0.0
     assert dac.fresh(np.array([1.0, math.nan])).tolist() == [1.0, 0.0]
+
+
+def test_a_request_measured_before_a_trip_gives_zero_kv_and_does_not_feed_the_watchdog():
+    amp, mark = AmplifierCore(watchdog=Watchdog(0.005, 3)), TripMark(window_s=1.0)
+    amp.command(1.000, 5.0)
+    mark.fed(1.000, 100.998)  # its stamp is on a clock 100 s ahead, and it arrived 2 ms after its measurement
+    assert amp.poll(1.020)[0].reason == Reason.WATCHDOG
+    mark.trip(1.020, mono_ns=10_000)
+    mark.trip(1.025, mono_ns=11_000)  # a repeat of the 0 kV keeps the first mark
+    assert mark.trip_stamp_s == pytest.approx(101.018)  # the trip on the stamps' clock
+    # measured before the trip, handled 1 ms later: queued; measured after it: fresh
+    assert mark.queued(101.017, 10_000 + 1_000_000) and not mark.queued(101.019, 10_000 + 1_000_000)
+    assert not mark.queued(0.0, 10_001)  # an unset stamp: counted fresh
+    assert not mark.queued(101.017, 10_000 + 1_000_000_001)  # beyond the window (clocks of other rates)
+    (out, note), = [amp.queued_request(1.021, 6.0)]
+    assert out.applied_kv == 0.0 and out.reason == Reason.WATCHDOG and out.requested_kv == 6.0
+    assert note.level == WARN and "measured before the watchdog tripped" in note.message
+    assert amp.tripped and amp.output_kv == 0.0 and amp.watchdog.last_s == 1.000  # not fed
+    assert amp.queued_request(1.022, math.nan)[1] is None  # one notice per trip
+    assert amp.poll(1.025)[0].reason == Reason.WATCHDOG  # still stale
+    (out, _), = amp.command(1.025, 6.0)  # a request measured after the trip resumes
+    assert out.applied_kv == 6.0 and not amp.tripped
+    mark.fed(1.025, 101.023)
+    assert not mark.queued(101.017, 10_001)
+    assert amp.poll(1.045)[0].reason == Reason.WATCHDOG
+    assert amp.queued_request(1.046, 7.0)[1] is not None  # a new trip: a new notice
+    assert not TripMark().queued(1.0, 0)  # never fed, never tripped
