@@ -7,7 +7,8 @@ Rules, in order of precedence:
 2. A non-finite request gives 0 kV.
 3. Finite requests are clamped to ``[v_min_kv, v_max_kv]``.
 4. The watchdog: no fresh command for more than ``watchdog_periods`` loop periods
-   gives 0 kV until commands return.
+   gives 0 kV until commands return; a command measured before the trip but handled
+   after it (queued while the node was starved) keeps 0 kV (:class:`TripMark`).
 5. Shutdown and disable give 0 kV.
 
 The paper's charge-reversal pre-conditioning (-1 kV held before each test) is a
