@@ -4,9 +4,9 @@ It turns requests into the command the 5 kV/V amplifier receives, under the rule
 :mod:`hasel.amplifier`: a hard 9 kV ceiling no parameter can raise (parameters above
 it are rejected with the reason), non-finite requests give 0 kV, requests are clamped
 to [v_min_kv, v_max_kv], no fresh request for more than ``watchdog_periods`` loop
-periods gives 0 kV, requests that were already queued when that 0 kV was sent (the node
-starved of CPU, their sender perhaps dead) are dropped, and shutdown commands 0 kV. It publishes every applied command on
-``/amp/applied`` (or ``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a
+periods gives 0 kV, requests measured before that 0 kV was sent but handled after it
+(queued while the node was starved of CPU, their sender perhaps dead) keep 0 kV, and
+shutdown commands 0 kV. It publishes every applied command on ``/amp/applied`` (or ``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a
 ``diagnostic_msgs`` status whenever the clamp or the watchdog acts.
 
 The paper's -1 kV charge reversal is a separate, deliberate request on
