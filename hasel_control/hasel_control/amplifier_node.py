@@ -6,8 +6,9 @@ it are rejected with the reason), non-finite requests give 0 kV, requests are cl
 to [v_min_kv, v_max_kv], no fresh request for more than ``watchdog_periods`` loop
 periods gives 0 kV, requests measured before that 0 kV was sent but handled after it
 (queued while the node was starved of CPU, their sender perhaps dead) keep 0 kV, and
-shutdown commands 0 kV. It publishes every applied command on ``/amp/applied`` (or ``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a
-``diagnostic_msgs`` status whenever the clamp or the watchdog acts.
+shutdown commands 0 kV. It publishes every applied command on ``/amp/applied`` (or
+``/amp/applied_batch`` for open-loop 10 kHz waveforms) and a ``diagnostic_msgs`` status
+whenever the clamp or the watchdog acts.
 
 The paper's -1 kV charge reversal is a separate, deliberate request on
 ``/amp/precondition`` (bounded to [-2, 0] kV); the controller's path cannot produce a
