@@ -180,12 +180,12 @@ class AmplifierCore:
         self.last_reason = Reason.NONE
         self.tripped = False
         self._tripped_at_s: float | None = None
-        self._dropped = 0  # queued requests dropped since the last trip (see queued_request)
+        self._drop_noticed = False  # a queued request dropped (and said) since the last feed (see queued_request)
 
     def _feed(self, now_s: float) -> None:
         self.watchdog.feed(now_s)
         self.tripped = False
-        self._dropped = 0
+        self._drop_noticed = False
 
     def _out(self, applied: Applied, now_s: float, **extra: float) -> tuple[Applied, Notice | None]:
         self.output_kv = applied.applied_kv
@@ -247,8 +247,7 @@ class AmplifierCore:
         would not have happened; handled now it is as stale as the trip said (its sender may be dead). It
         gives 0 kV (``WATCHDOG``) and does not feed the watchdog; a WARN notice says so at the first
         one after each trip (see :class:`TripMark`, which decides what counts as measured before)."""
-        first = not self._dropped
-        self._dropped += 1
+        first, self._drop_noticed = not self._drop_noticed, True
         req = _finite_or_none(requested_kv)
         out, _ = self._out(Applied(math.nan if req is None else req, 0.0, Reason.WATCHDOG), now_s)
         if not first:
