@@ -18,6 +18,7 @@ range without any pile-up; an end stop leaves most of the range straight and fla
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -87,6 +88,11 @@ class Saturation(Effect):
 #: sensor's calibration curve bends the whole range (without the bound a stop with its knee at the
 #: bottom is an exponential curve over the whole range)
 STOP_KNEE_MIN_QUANTILE = 0.5
+#: an end stop flattens within the data: its slope at the output's last 0.5 % is at most this share of
+#: the line's (a bend milder than that is any curvature, or with a large room a mere gain and offset)
+STOP_MAX_END_SLOPE = 0.5
+#: an end stop's room is at least this share of the output's range (a sharper one is the hard clip)
+STOP_MIN_ROOM_SHARE = 0.02
 
 
 def end_stop(x: np.ndarray, knee: float, room: float, upper: bool = True) -> np.ndarray:
@@ -331,15 +337,26 @@ def stop_map(y: np.ndarray, f: EffectFit) -> np.ndarray:
     return f.theta[3] + f.theta[2] * end_stop(y, f.theta[0], f.theta[1], f.variant.endswith("upper"))
 
 
+def _stop_deep(f: EffectFit, y_end: float) -> bool:
+    """Whether the stop ``f`` flattens within the data: its slope at ``y_end`` (the output's 0.5 % from
+    the stop's end) is at most :data:`STOP_MAX_END_SLOPE` of the line's."""
+    knee, room = f.theta[0], f.theta[1]
+    d = (y_end - knee) if f.variant.endswith("upper") else (knee - y_end)
+    return d > 0 and math.exp(-d / room) <= STOP_MAX_END_SLOPE
+
+
 def _fit_stop(pipe: FitContext, effects: dict[str, EffectFit], ys: np.ndarray) -> EffectFit | None:
     """The best smooth end stop of the output ``ys`` (either end): a grid of knees (quantiles from
     :data:`STOP_KNEE_MIN_QUANTILE` on) and rooms (shares of the range), the gain and offset by least
-    squares at each, then least squares on all four within those knees."""
+    squares at each, then least squares on all four within those knees. Only stops that flatten
+    within the data (:func:`_stop_deep`) and are smooth (room at least :data:`STOP_MIN_ROOM_SHARE` of the
+    range: a sharper one is the hard clip) are offered."""
     span = float(np.ptp(ys))
     if not np.isfinite(span) or span <= 0:
         return None
     q0 = STOP_KNEE_MIN_QUANTILE
     exact = not _downstream_nonlinear(effects, SLOT_ORDER["saturation:output"])
+    ends = {"upper": float(np.quantile(ys, 0.995)), "lower": float(np.quantile(ys, 0.005))}
     best, best_cost = None, np.inf
     for end in ("upper", "lower"):
         qs = np.linspace(q0, 0.97, 6)
@@ -348,6 +365,8 @@ def _fit_stop(pipe: FitContext, effects: dict[str, EffectFit], ys: np.ndarray) -
         for k in knees:
             for r in span * np.array([0.03, 0.08, 0.2, 0.5]):
                 f = EffectFit("saturation", variant, (float(k), float(r), 1.0, 0.0))
+                if not _stop_deep(f, ends[end]):
+                    continue
                 if exact:  # the gain and offset are linear in the output: least squares on the stop's output
                     def basis(ri, st, f=f):
                         z = end_stop(st["y_drift"], f.theta[0], f.theta[1], end == "upper")
@@ -361,9 +380,10 @@ def _fit_stop(pipe: FitContext, effects: dict[str, EffectFit], ys: np.ndarray) -
         return None
     up = best.variant.endswith("upper")
     lim = float(np.quantile(ys, q0 if up else 1.0 - q0))
-    lo = np.array([lim if up else float(ys.min()) - span, 1e-3 * span, 0.2, -np.inf])
+    lo = np.array([lim if up else float(ys.min()) - span, STOP_MIN_ROOM_SHARE * span, 0.2, -np.inf])
     hi = np.array([float(ys.max()) + span if up else lim, 2.0 * span, 5.0, np.inf])
-    return _refine(pipe, effects, best, lo, hi, max_nfev=40)
+    refined = _refine(pipe, effects, best, lo, hi, max_nfev=40)
+    return refined if _stop_deep(refined, ends["upper" if up else "lower"]) else best
 
 
 FAMILY = SaturationFamily()
