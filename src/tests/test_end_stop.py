@@ -73,3 +73,22 @@ def test_a_bow_over_the_whole_range_stays_a_sensor_curve():
     y = z + 0.35 * np.sin(np.pi * z / 9.0) + 0.005 * rng.standard_normal(z.size)
     v = diagnose(np.arange(u.size) / RATE_HZ, u, y, model=_model(), units=("kV", "mm"))
     assert v.names == ["sensor_nonlinearity"]
+
+
+def test_beside_a_load_the_stop_leaves_the_load_most_of_what_is_left():
+    """The independent simulator's tanh stroke knee (5.8 mm, 0.4 mm room) and a heavier mode at 500 Hz
+    (``test_diagnose_combos``'s log): with the hard clip the knee left 19 times the floor's energy and the
+    load removed 45 % of it; the stop leaves the load 80 %."""
+    from hasel_bench.othersim import ForeignEffect, excitation, simulate
+
+    rng = np.random.default_rng(4)
+    u, _ = excitation(rng, 500.0, short=True)
+    effs = [ForeignEffect("saturation", "soft_stroke", {"knee_mm": 5.8, "room_mm": 0.4}),
+            ForeignEffect("load_mass", "heavier_mode", {"mass_ratio": 1.1})]
+    y = simulate(u, 500.0, effs) + 0.004 * rng.standard_normal(u.size)
+    v = diagnose(np.arange(u.size) / 500.0, u, y, model=_model(), units=("kV", "mm"))
+    assert v.names == ["saturation", "load_mass"]
+    assert v.effects[0]["params"]["variant"] == "output:stop_upper"
+    second = next(r for r in v.rounds if r.get("round") == 2)
+    assert second["gain"] > 0.7
+    assert v.heldout["gap_shrink"] > 0.97
