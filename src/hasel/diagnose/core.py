@@ -497,7 +497,9 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # and the interleaved held-out blocks, which share the wander with their training neighbours, credit it.
     # A map must then also improve the fast part (slow part over wander_zc_s removed) on its own
     t_fast = ctx.fast_block(st.e_ho, e_new)
-    slow_only = (opts.map_fast_t_min > 0 and any(n in _MAP_SIDES for n in new_names)
+    # (an end stop on a recalibrated line is such a map of the output level too)
+    level_map = any(n in _MAP_SIDES or "stop_" in eff_new[n].variant for n in new_names)
+    slow_only = (opts.map_fast_t_min > 0 and level_map
                  and z_col < opts.zc_min and t_fast < opts.map_fast_t_min)
     held_out_ok = held_out_ok and not slow_only
     magnitude = None

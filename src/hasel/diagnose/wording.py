@@ -33,6 +33,12 @@ def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "") -> str:
         return ("the measured output piles up on " + " and ".join(
             f"{clipped[e]['value']:.4g} ({clipped[e]['samples']} samples, its {e} end)" for e in ends)
                 + " while the model goes beyond: the measured range is clipped there")
+    if end.startswith("stop_"):
+        e = end[len("stop_"):]
+        k, r, g, c = fit.theta
+        lim = c + g * (k + r if e == "upper" else k - r)
+        return (f"the output follows the model up to {c + g * k:.4g} and flattens beyond it towards "
+                f"{lim:.4g} while the rest of the range stays straight: a smooth end stop at the {e} end")
     return (f"the residual is confined to the {end} end of the {side} range: a hard limit at "
             f"{fit.theta[0]:.4g}")
 

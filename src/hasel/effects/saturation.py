@@ -8,26 +8,31 @@ Forms
 - generic ``input:upper|lower`` / ``output:upper|lower`` (``theta = (limit,)``): a clip of
   the input or of the output; ``measured:upper|lower|both`` (``(limit,)`` or
   ``(lower, upper)``): the measured range where the output piles up, applied last;
-  ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`).
+  ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`);
+  ``output:stop_upper|stop_lower`` (``(knee, room, gain, offset)``): a smooth end stop of the
+  stroke (:func:`stop_map`): up to ``knee`` a line, beyond it the output approaches
+  ``knee + room`` (``knee - room`` for the lower end) on that line.
 
 Signature: a clip piles samples on one value (:func:`pile_up`); a curve bends the whole
-range without any pile-up.
+range without any pile-up; an end stop leaves most of the range straight and flattens one end.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _fit_scalar, _sse, _with, fit_log_scalar, rate_grid
+from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
+from hasel.effects.fitkit import (_downstream_nonlinear, _fit_scalar, _ls, _refine, _sse, _with, fit_log_scalar,
+                                  rate_grid)
 from hasel.effects.operators import rate_limited, rate_step
 from hasel.errors import BadInputError
 from hasel.validate import positive
 
 __all__ = ["Saturation", "ClipStage", "SlewStage", "SoftLimitStage", "clip", "slew_limit", "measured_clip",
-           "pile_up", "SaturationFamily", "FAMILY"]
+           "pile_up", "end_stop", "stop_map", "STOP_KNEE_MIN_QUANTILE", "SaturationFamily", "FAMILY"]
 
 
 def _choice(rng: np.random.Generator, options: tuple[str, ...]) -> str:
@@ -78,8 +83,39 @@ class Saturation(Effect):
                    knee_mm=float(rng.uniform(0.02, 0.15)))
 
 
+#: the fitted end stop's knee lies at or beyond this quantile of the output (upper end; 1 - it for
+#: the lower): an end stop engages near the end of the travel and leaves the rest straight, where a
+#: sensor's calibration curve bends the whole range (without the bound a stop with its knee at the
+#: bottom is an exponential curve over the whole range)
+STOP_KNEE_MIN_QUANTILE = 0.5
+#: an end stop flattens within the data: its slope at the output's last 0.5 % is at most this share of
+#: the line's (a bend milder than that is any curvature, or with a large room a mere gain and offset)
+STOP_MAX_END_SLOPE = 0.5
+#: an end stop's room is at least this share of the output's range (a sharper one is the hard clip)
+STOP_MIN_ROOM_SHARE = 0.02
+
+
+def end_stop(x: np.ndarray, knee: float, room: float, upper: bool = True) -> np.ndarray:
+    """``x`` through a smooth one-sided end stop (same units as ``x``).
+
+    Up to ``knee`` the output is ``x``; beyond it the output approaches ``knee + room``
+    (upper end; ``knee - room`` for the lower) as ``knee + room (1 - exp(-(x - knee) / room))``:
+    slope 1 at the knee (no kink), ever flatter after it, the stiffening of an end stop.
+    ``room`` > 0 (the travel left beyond the knee).
+    """
+    x = np.asarray(x, float)
+    r = max(float(room), 1e-12)
+    d = (x - knee) if upper else (knee - x)
+    bent = r * -np.expm1(-np.maximum(d, 0.0) / r)
+    out = np.where(d > 0, bent, d)
+    return knee + out if upper else knee - out
+
+
 def clip(x: np.ndarray, f: EffectFit) -> np.ndarray:
-    """``x`` clipped as the generic fit ``f`` says (variant ending ``upper``, ``lower`` or ``both``)."""
+    """``x`` clipped as the generic fit ``f`` says (variant ending ``upper``, ``lower`` or ``both``;
+    ``stop_upper``/``stop_lower``: the smooth end stop :func:`end_stop` of ``theta = (knee, room)``)."""
+    if "stop_" in f.variant:
+        return stop_map(x, f)
     if f.variant.endswith("both"):
         return np.clip(x, f.theta[0], f.theta[1])
     return np.minimum(x, f.theta[0]) if f.variant.endswith("upper") else np.maximum(x, f.theta[0])
@@ -195,6 +231,8 @@ class SaturationFamily(EffectFamily):
         """``("slew_rate",)``, ``("lower", "upper")`` or ``("limit",)``."""
         if fit.variant == "slew":
             return ("slew_rate",)
+        if "stop_" in fit.variant:
+            return ("knee", "room", "gain", "offset")
         if fit.variant.endswith("both"):
             return ("lower", "upper")
         return (fit.variant.split(":")[-1],)
@@ -218,6 +256,8 @@ class SaturationFamily(EffectFamily):
         """A slew limit is positive; a clip's limits are free."""
         if fit.variant == "slew":
             return np.array([1e-12]), np.array([np.inf])
+        if "stop_" in fit.variant:
+            return np.array([-np.inf, 1e-12, 0.0, -np.inf]), np.array([np.inf, np.inf, np.inf, np.inf])
         return super().bounds(ctx, fit)
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
@@ -235,6 +275,16 @@ class SaturationFamily(EffectFamily):
         side, end = fit.variant.split(":")
         out["acts_on"] = "output" if side == "measured" else side
         out["unit"] = ui if side == "input" else uo
+        if end.startswith("stop_"):
+            up = end == "stop_upper"
+            out["end"] = "upper" if up else "lower"
+            out["knee"], out["room"], out["gain"], out["offset"] = th
+            out["limit"] = th[3] + th[2] * (th[0] + th[1] if up else th[0] - th[1])
+            out["form"] = ("y = offset + gain s(z), s(z) = z up to the knee, then knee + room (1 - exp(-(z - knee)/room)):"
+                           " a smooth end stop that the output approaches (limit: offset + gain (knee + room))" if up else
+                           "y = offset + gain s(z), s(z) = z down to the knee, then knee - room (1 - exp(-(knee - z)/"
+                           "room)): a smooth end stop that the output approaches (limit: offset + gain (knee - room))")
+            return out
         if end == "both":
             out["lower"], out["upper"] = th[0], th[1]
         else:
@@ -265,6 +315,11 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
             c = _sse(pipe, _with(effects, fit))
             if c < best_cost:
                 best, best_cost = fit, c
+    stop = _fit_stop(pipe, effects, ys)
+    if stop is not None:
+        c = _sse(pipe, _with(effects, stop))
+        if c < best_cost:
+            best, best_cost = stop, c
     # a slew-rate limit of the input: the gap only where the input moves faster than the limit
     grid = rate_grid(st[0]["x_delay"], pipe.prep.dt_s)
     rate, c = fit_log_scalar(lambda v: _sse(pipe, _with(effects, EffectFit("saturation", "slew", (v,)))), grid)
@@ -272,6 +327,63 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
         best, best_cost = EffectFit("saturation", "slew", (rate,)), c
     return best
 
+
+
+def stop_map(y: np.ndarray, f: EffectFit) -> np.ndarray:
+    """The fitted end stop ``f`` (``theta = (knee, room, gain, offset)``) on the output ``y``:
+    ``offset + gain * end_stop(y, knee, room)`` (output units). The gain and offset let the stop sit
+    on a recalibrated line, as a sensor curve's lowest terms do, so that the two compete on the shape
+    of the bend alone."""
+    return f.theta[3] + f.theta[2] * end_stop(y, f.theta[0], f.theta[1], f.variant.endswith("upper"))
+
+
+def _stop_deep(f: EffectFit, y_end: float) -> bool:
+    """Whether the stop ``f`` flattens within the data: its slope at ``y_end`` (the output's 0.5 % from
+    the stop's end) is at most :data:`STOP_MAX_END_SLOPE` of the line's."""
+    knee, room = f.theta[0], f.theta[1]
+    d = (y_end - knee) if f.variant.endswith("upper") else (knee - y_end)
+    return d > 0 and math.exp(-d / room) <= STOP_MAX_END_SLOPE
+
+
+def _fit_stop(pipe: FitContext, effects: dict[str, EffectFit], ys: np.ndarray) -> EffectFit | None:
+    """The best smooth end stop of the output ``ys`` (either end): a grid of knees (quantiles from
+    :data:`STOP_KNEE_MIN_QUANTILE` on) and rooms (shares of the range), the gain and offset by least
+    squares at each, then least squares on all four within those knees. Only stops that flatten
+    within the data (:func:`_stop_deep`) and are smooth (room at least :data:`STOP_MIN_ROOM_SHARE` of the
+    range: a sharper one is the hard clip) are offered."""
+    span = float(np.ptp(ys))
+    if not np.isfinite(span) or span <= 0:
+        return None
+    q0 = STOP_KNEE_MIN_QUANTILE
+    exact = not _downstream_nonlinear(effects, SLOT_ORDER["saturation:output"])
+    ends = {"upper": float(np.quantile(ys, 0.995)), "lower": float(np.quantile(ys, 0.005))}
+    best, best_cost = None, np.inf
+    for end in ("upper", "lower"):
+        qs = np.linspace(q0, 0.97, 6)
+        knees = np.quantile(ys, qs if end == "upper" else 1.0 - qs)
+        variant = f"output:stop_{end}"
+        for k in knees:
+            for r in span * np.array([0.03, 0.08, 0.2, 0.5]):
+                f = EffectFit("saturation", variant, (float(k), float(r), 1.0, 0.0))
+                if not _stop_deep(f, ends[end]):
+                    continue
+                if exact:  # the gain and offset are linear in the output: least squares on the stop's output
+                    def basis(ri, st, f=f):
+                        z = end_stop(st["y_drift"], f.theta[0], f.theta[1], end == "upper")
+                        return [np.ones_like(z), z]
+                    w = _ls(pipe, _with(effects, f), basis)
+                    f = EffectFit("saturation", variant, (float(k), float(r), 1.0 + float(w[1]), float(w[0])))
+                c = _sse(pipe, _with(effects, f))
+                if c < best_cost:
+                    best, best_cost = f, c
+    if best is None:
+        return None
+    up = best.variant.endswith("upper")
+    lim = float(np.quantile(ys, q0 if up else 1.0 - q0))
+    lo = np.array([lim if up else float(ys.min()) - span, STOP_MIN_ROOM_SHARE * span, 0.2, -np.inf])
+    hi = np.array([float(ys.max()) + span if up else lim, 2.0 * span, 5.0, np.inf])
+    refined = _refine(pipe, effects, best, lo, hi, max_nfev=40)
+    return refined if _stop_deep(refined, ends["upper" if up else "lower"]) else best
 
 
 FAMILY = SaturationFamily()
