@@ -93,6 +93,8 @@ STOP_KNEE_MIN_QUANTILE = 0.5
 STOP_MAX_END_SLOPE = 0.5
 #: an end stop's room is at least this share of the output's range (a sharper one is the hard clip)
 STOP_MIN_ROOM_SHARE = 0.02
+# The three limits were set on the tuning sets only (bench/tune_diag/RESULT-h-stop.md): the true stops there
+# flatten to 0.01-0.08 of the line's slope, the stops that were a gain and offset stayed at 0.95-0.99.
 
 
 def end_stop(x: np.ndarray, knee: float, room: float, upper: bool = True) -> np.ndarray:
