@@ -129,8 +129,9 @@ _SEPARATING = {
         "a load moves the magnitude near the resonance, a delay only the phase (linear in frequency): a "
         "sweep through the resonance with enough amplitude there separates them",
     frozenset(("saturation", "sensor_nonlinearity")):
-        "a clip piles samples on one value, a curve bends the whole range: a larger amplitude that drives "
-        "the output further into the limit separates them",
+        "a clip piles samples on one value and an end stop flattens one end with the rest straight, where a "
+        "sensor curve bends the whole range: a larger amplitude that drives the output further into the limit "
+        "separates them",
     frozenset(("saturation", "static_nonlinearity")):
         "a larger amplitude: a limit flattens the response beyond one value, a map bends the whole range",
     frozenset(("charge_drift", "load_mass")):
