@@ -67,6 +67,7 @@ from hasel.diagnose.wording import _evidence
 from hasel.effects.drift import LEVEL_CARRIERS
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.registry import family
+from hasel.effects.saturation import is_stop
 from hasel.errors import BadInputError
 
 __all__ = ["DiagnoseOptions", "Verdict", "DiagnosisFailed", "diagnose", "block_test", "coloured_z", "raised_resonance"]
@@ -498,7 +499,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # A map must then also improve the fast part (slow part over wander_zc_s removed) on its own
     t_fast = ctx.fast_block(st.e_ho, e_new)
     # (an end stop on a recalibrated line is such a map of the output level too)
-    level_map = any(n in _MAP_SIDES or "stop_" in eff_new[n].variant for n in new_names)
+    level_map = any(n in _MAP_SIDES or is_stop(eff_new[n]) for n in new_names)
     slow_only = (opts.map_fast_t_min > 0 and level_map
                  and z_col < opts.zc_min and t_fast < opts.map_fast_t_min)
     held_out_ok = held_out_ok and not slow_only

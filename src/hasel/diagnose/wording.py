@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.effects.load import load_offset
+from hasel.effects.saturation import stop_limit
 
 __all__: list[str] = []
 
@@ -35,10 +36,9 @@ def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "") -> str:
                 + " while the model goes beyond: the measured range is clipped there")
     if end.startswith("stop_"):
         e = end[len("stop_"):]
-        k, r, g, c = fit.theta
-        lim = c + g * (k + r if e == "upper" else k - r)
+        k, _, g, c = fit.theta
         return (f"the output follows the model up to {c + g * k:.4g} and flattens beyond it towards "
-                f"{lim:.4g} while the rest of the range stays straight: a smooth end stop at the {e} end")
+                f"{stop_limit(fit):.4g} while the rest of the range stays straight: a smooth end stop at the {e} end")
     return (f"the residual is confined to the {end} end of the {side} range: a hard limit at "
             f"{fit.theta[0]:.4g}")
 

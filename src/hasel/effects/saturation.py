@@ -32,7 +32,7 @@ from hasel.errors import BadInputError
 from hasel.validate import positive
 
 __all__ = ["Saturation", "ClipStage", "SlewStage", "SoftLimitStage", "clip", "slew_limit", "measured_clip",
-           "pile_up", "end_stop", "stop_map", "STOP_KNEE_MIN_QUANTILE", "SaturationFamily", "FAMILY"]
+           "pile_up", "end_stop", "stop_map", "is_stop", "stop_limit", "STOP_KNEE_MIN_QUANTILE", "SaturationFamily", "FAMILY"]
 
 
 def _choice(rng: np.random.Generator, options: tuple[str, ...]) -> str:
@@ -113,10 +113,21 @@ def end_stop(x: np.ndarray, knee: float, room: float, upper: bool = True) -> np.
     return knee + out if upper else knee - out
 
 
+def is_stop(f: EffectFit) -> bool:
+    """Whether ``f`` is a fitted smooth end stop (variant ``output:stop_upper|stop_lower``)."""
+    return f.name == "saturation" and "stop_" in f.variant
+
+
+def stop_limit(f: EffectFit) -> float:
+    """The output value the fitted end stop ``f`` approaches, ``offset + gain (knee +- room)`` (output units)."""
+    knee, room, gain, offset = f.theta
+    return offset + gain * (knee + room if f.variant.endswith("upper") else knee - room)
+
+
 def clip(x: np.ndarray, f: EffectFit) -> np.ndarray:
     """``x`` clipped as the generic fit ``f`` says (variant ending ``upper``, ``lower`` or ``both``;
     ``stop_upper``/``stop_lower``: the smooth end stop :func:`end_stop` of ``theta = (knee, room)``)."""
-    if "stop_" in f.variant:
+    if is_stop(f):
         return stop_map(x, f)
     if f.variant.endswith("both"):
         return np.clip(x, f.theta[0], f.theta[1])
@@ -233,7 +244,7 @@ class SaturationFamily(EffectFamily):
         """``("slew_rate",)``, ``("lower", "upper")`` or ``("limit",)``."""
         if fit.variant == "slew":
             return ("slew_rate",)
-        if "stop_" in fit.variant:
+        if is_stop(fit):
             return ("knee", "room", "gain", "offset")
         if fit.variant.endswith("both"):
             return ("lower", "upper")
@@ -258,7 +269,7 @@ class SaturationFamily(EffectFamily):
         """A slew limit is positive; a clip's limits are free."""
         if fit.variant == "slew":
             return np.array([1e-12]), np.array([np.inf])
-        if "stop_" in fit.variant:
+        if is_stop(fit):
             return np.array([-np.inf, 1e-12, 0.0, -np.inf]), np.array([np.inf, np.inf, np.inf, np.inf])
         return super().bounds(ctx, fit)
 
@@ -281,7 +292,7 @@ class SaturationFamily(EffectFamily):
             up = end == "stop_upper"
             out["end"] = "upper" if up else "lower"
             out["knee"], out["room"], out["gain"], out["offset"] = th
-            out["limit"] = th[3] + th[2] * (th[0] + th[1] if up else th[0] - th[1])
+            out["limit"] = stop_limit(fit)
             out["form"] = ("y = offset + gain s(z), s(z) = z up to the knee, then knee + room (1 - exp(-(z - knee)/room)):"
                            " a smooth end stop that the output approaches (limit: offset + gain (knee + room))" if up else
                            "y = offset + gain s(z), s(z) = z down to the knee, then knee - room (1 - exp(-(knee - z)/"
