@@ -82,6 +82,19 @@ def _simulate(u: np.ndarray, rate_hz: float) -> np.ndarray:
     return np.asarray(y).ravel()
 
 
+def random_levels(rng: np.random.Generator, n: int, lo_kv: float, hi_kv: float,
+                  hold_samples: tuple[int, int] = (20, 200)) -> np.ndarray:
+    """``n`` samples of random voltage levels, kV: each uniform in ``[lo_kv, hi_kv]``, held for a random
+    number of samples in ``[hold_samples[0], hold_samples[1])``."""
+    u = np.empty(n)
+    i = 0
+    while i < n:
+        k = int(rng.integers(*hold_samples))
+        u[i:i + k] = rng.uniform(lo_kv, hi_kv)
+        i += k
+    return u
+
+
 def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator,
                       hold_s: tuple[float, float] = (0.05, 1.0)) -> np.ndarray:
     if kind in ("paper_chirp", "paper_chirp3"):

@@ -2,15 +2,15 @@
 
 An end stop leaves most of the range straight and flattens one end; a sensor's calibration curve
 bends the whole range. Both act after the dynamics, so the data tell them apart by the shape of the
-bend only. The logs are written here from the transfer function (scipy's ZOH) and a ``tanh`` knee
+bend only. The logs are written here from P(s) (scipy's ZOH, `designs._simulate`) and a ``tanh`` knee
 (not the library's exponential stop), or a bow over the whole range for the control.
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import signal
 
+import designs
 from hasel import paper
 from hasel.diagnose import diagnose
 from hasel.effects.base import EffectFit
@@ -21,17 +21,8 @@ RATE_HZ = 1000.0
 
 def _stroke(seed: int, dur_s: float = 40.0) -> tuple[np.ndarray, np.ndarray]:
     """Random voltage levels (2-6.5 kV, held 20-200 ms) and P(s)'s stroke (mm)."""
-    rng = np.random.default_rng(seed)
-    n = int(dur_s * RATE_HZ)
-    u = np.empty(n)
-    i = 0
-    while i < n:
-        k = int(rng.integers(20, 200))
-        u[i:i + k] = rng.uniform(2.0, 6.5)
-        i += k
-    b, a, _ = signal.cont2discrete(paper.plant_tf(), 1.0 / RATE_HZ, method="zoh")
-    b = np.ravel(b)
-    return u, signal.lfilter(b, a, u, zi=signal.lfilter_zi(b, a) * u[0])[0]
+    u = designs.random_levels(np.random.default_rng(seed), int(dur_s * RATE_HZ), 2.0, 6.5)
+    return u, designs._simulate(u, RATE_HZ)
 
 
 def _model() -> dict:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+import designs
 from hasel import paper
 from hasel.diagnose import diagnose
 
@@ -44,12 +45,7 @@ def _log(f: float, delay_s: float, seed: int, dur_s: float = 40.0, noise_mm: flo
     """Random voltage levels (2-6 kV, held 20-200 ms each), white noise on the stroke."""
     rng = np.random.default_rng(seed)
     n = int(dur_s * RATE_HZ)
-    u = np.empty(n)
-    i = 0
-    while i < n:
-        k = int(rng.integers(20, 200))
-        u[i:i + k] = rng.uniform(2.0, 6.0)
-        i += k
+    u = designs.random_levels(rng, n, 2.0, 6.0)
     b, a, _ = signal.cont2discrete(_plant(f, delay_s), 1.0 / RATE_HZ, method="zoh")
     b = np.ravel(b)
     y = signal.lfilter(b, a, u, zi=signal.lfilter_zi(b, a) * u[0])[0] + noise_mm * rng.standard_normal(n)
