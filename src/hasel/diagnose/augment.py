@@ -82,7 +82,7 @@ from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonline
                                   monomial, monomials, poly_map, rate_grid, sumsq)
 from hasel.effects.hysteresis import HYST_THRESHOLDS
 from hasel.effects.hysteresis import branch as _branch
-from hasel.effects.load import LOAD_SAG_MIN_MU, damping_factor, keeps_zeta, load_offset, loaded_den  # noqa: F401
+from hasel.effects.load import LOAD_SAG_MIN_MU, damping_factor, keeps_zeta, load_offset, loaded_den, mode_of  # noqa: F401
 from hasel.effects.operators import play
 from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
@@ -155,23 +155,25 @@ class Pipeline:
 
     # -- linear model with load --------------------------------------------------------------
     def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None,
-               zeta_kept: bool = False, damping: float | None = None) -> LinearSim:
+               zeta_kept: bool = False, damping: float | None = None,
+               mode: tuple[float, float] | None = None) -> LinearSim:
         """The model (``lin``, a re-identified linear part, or the nominal) with ``1 + mu`` times
         the inertia of its resonances (``zeta_kept``: their frequency lowered, damping ratio kept;
         ``damping``: their frequency over ``sqrt(1 + mu)`` and their damping ratio times ``damping``;
-        :func:`hasel.effects.load.loaded_den`) (cached), times the gain ``kappa``."""
+        ``mode``: an added pole pair (Hz, damping ratio); :func:`hasel.effects.load.loaded_den`) (cached),
+        times the gain ``kappa``."""
         base = ("nominal",) if lin is None else lin.theta
         if damping is not None and damping == 1.0 and mu == 0.0:
             damping = None
         key = (round(mu, 12), bool(zeta_kept) and mu != 0.0,
-               None if damping is None else round(float(damping), 12)) + base
+               None if damping is None else round(float(damping), 12), mode) + base
         sim = self._lin.get(key)
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
-            if mu == 0.0 and damping is None:
+            if mu == 0.0 and damping is None and mode is None:
                 sim = self.nominal if lin is None else self.prep.sim(num, den)
             else:
-                sim = self.prep.sim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping))
+                sim = self.prep.sim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping, mode=mode))
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim
@@ -184,7 +186,7 @@ class Pipeline:
         f = effects.get("load_mass")
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
         return self.loaded(mu, kappa, effects.get(LINEAR), f is not None and keeps_zeta(f),
-                           damping_factor(f) if f is not None else None)
+                           damping_factor(f) if f is not None else None, mode_of(f) if f is not None else None)
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -257,9 +259,10 @@ class Pipeline:
         mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
         zk = f is not None and keeps_zeta(f)
         dk = damping_factor(f) if f is not None else None
+        md = mode_of(f) if f is not None else None
         lin = e.get(LINEAR)
-        key += ("l", mu, kappa, zk, dk) + (lin.theta if lin is not None else ())
-        sim = self.loaded(mu, kappa, lin, zk, dk)
+        key += ("l", mu, kappa, zk, dk, md) + (lin.theta if lin is not None else ())
+        sim = self.loaded(mu, kappa, lin, zk, dk, md)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         if f is not None and "sag" in f.variant.split(":"):  # the load's weight: a static offset (a sag)
             key += ("sag", load_offset(f))

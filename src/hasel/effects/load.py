@@ -18,8 +18,16 @@ Forms
   a damper, a softer or a more lossy support). It nests the two forms above (``delta = 1/sqrt(1 + mu)``
   is the inertia form, ``delta = 1`` the damping-ratio-kept one) and is taken in their place only when
   its one more parameter lowers the training BIC and the magnitude near the resonance shows it.
+- generic ``model:mode`` (``theta = (mu, kappa, mode_hz, zeta)``): an added mode, P(s) times
+  ``w^2 / (s^2 + 2 zeta w s + w^2)`` (``w = 2 pi mode_hz``, the static gain kept; a payload on a compliant
+  mount), ``mode_hz`` 1.05-8x the model's resonance, ``zeta`` 0.05-0.6; fitted with ``mu`` held at 0 (the
+  model's own resonances kept; a joint refinement may move it). Within the excited band such a mode's extra
+  phase lag can pass for a delay (``bench/tune_diag/multi2.py`` seed 21, case 3, was named ``time_delay,
+  load_mass``); it is taken in place of the forms above only when it lowers the training BIC and the magnitude
+  where it acts (from a fifth of its frequency up) moved, rose below it and is explained by it
+  (:func:`mode_evidence`): a delay moves no magnitude, a lag only lowers it.
 
-Both transform the linear model with :func:`loaded_den`; the load acts in the
+All transform the linear model with :func:`loaded_den`; the load acts in the
 ``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
 a load moves the magnitude near the resonance (and the phase with it), a delay only the
 phase, linearly in frequency.
@@ -38,7 +46,8 @@ from hasel.effects.evidence import resonance_hz
 from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
 
-__all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "load_offset", "LinearStage",
+__all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "mode_of", "mode_evidence", "load_offset",
+           "LinearStage",
            "LoadFamily", "FAMILY", "resonance_signature", "DAMP_MIN", "DAMP_MAX"]
 
 #: Least change of the inertia (``|mu|``) for a load to carry a static offset (its weight's sag).
@@ -54,6 +63,27 @@ DAMP_MIN, DAMP_MAX = 0.25, 4.0
 DAMP_GRID = (0.45, 0.7, 1.5, 2.2)
 #: Whether the diagnosis tries the ``model:damp`` form (a switch for measuring it against the two older forms).
 DAMP_FORM = True
+#: Starting frequencies of the ``model:mode`` form's added pole pair, over the model's resonance (the added modes
+#: of ``bench/tune_diag/multi2.py`` seed 21, ``polepair``: 1.5-5x; ``bench/tune_diag/modes.py`` seed 1: 1.2-4x).
+MODE_GRID = (1.3, 1.8, 2.5, 3.5, 5.0)
+#: Starting damping ratios of the added pole pair (the tuning modes: 0.1-0.5).
+MODE_ZETA_GRID = (0.15, 0.35)
+#: Range of the added mode's frequency over the model's resonance, and of its damping ratio (beyond 8x the mode
+#: is a small phase lag above the excited band, a delay's shape; above a damping ratio of 0.6 a pair is a lag's shape
+#: and lifts no magnitude below it: the tuning modes are 0.1-0.5).
+MODE_RATIO_MIN, MODE_RATIO_MAX = 1.05, 8.0
+MODE_ZETA_MIN, MODE_ZETA_MAX = 0.05, 0.6
+#: Least median magnitude change (dB) of the measured-over-model response where an added mode acts for the form to
+#: be taken (:func:`mode_evidence`): the tail of a mode at a fifth of its frequency (``multi2.py`` seed 21 case 3:
+#: 0.8 dB, the effect-free and delayed logs there and in ``modes.py`` seed 1 well below 0.1 dB).
+MODE_MIN_DB = 0.3
+#: Below this share of the mode's frequency a mode of damping ratio up to ``MODE_ZETA_MAX`` raises the magnitude
+#: (``|H| > 1`` for ``f/f_mode < sqrt(2 - 4 zeta^2)``: 0.71 at 0.6); there :func:`mode_evidence` asks for a rise: a
+#: delay plus a lag (``multi2.py`` seed 21, cases 8 and 26) lowers the magnitude and was taken for a mode of
+#: damping ratio near 1 without this check.
+MODE_RISE_BELOW = 0.7
+#: Whether the diagnosis tries the ``model:mode`` form.
+MODE_FORM = True
 
 
 @dataclass(frozen=True)
@@ -114,13 +144,31 @@ def damping_factor(fit: EffectFit) -> float | None:
     return float(fit.theta[2]) if "damp" in fit.variant.split(":") else None
 
 
+def mode_of(fit: EffectFit) -> tuple[float, float] | None:
+    """The added mode ``(f_hz, zeta)`` (Hz, dimensionless) of a ``model:mode[:sag]`` load fit, else None."""
+    return (float(fit.theta[2]), float(fit.theta[3])) if "mode" in fit.variant.split(":") else None
+
+
 def load_offset(fit: EffectFit) -> float:
     """The static offset (a sag, output unit, ``<= 0``) of a ``...:sag`` load fit, else 0."""
     return float(fit.theta[-1]) if "sag" in fit.variant.split(":") else 0.0
 
 
 def loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: bool = False,
-               damping: float | None = None) -> np.ndarray:
+               damping: float | None = None, mode: tuple[float, float] | None = None) -> np.ndarray:
+    """``den`` (descending powers of s) with ``1 + mu`` times the inertia of its resonances (see
+    :func:`_loaded_den`) and, with ``mode = (f_hz, zeta)``, an added pole pair of natural frequency
+    ``f_hz`` (Hz) and damping ratio ``zeta`` as the factor ``s^2 / w^2 + 2 zeta s / w + 1``
+    (``w = 2 pi f_hz``): ``den(0)``, the static gain, is kept."""
+    den2 = _loaded_den(den, mu, rescale=rescale, zeta_kept=zeta_kept, damping=damping)
+    if mode is None:
+        return den2
+    w = 2.0 * math.pi * float(mode[0])
+    return np.polymul(den2, [1.0 / (w * w), 2.0 * float(mode[1]) / w, 1.0])
+
+
+def _loaded_den(den: np.ndarray, mu: float, *, rescale: bool = True, zeta_kept: bool = False,
+                damping: float | None = None) -> np.ndarray:
     """``den`` (descending powers of s) with ``1 + mu`` times the inertia of its resonances.
 
     Each complex pole pair's ``s^2`` term is multiplied (natural frequency and damping ratio
@@ -272,6 +320,103 @@ def _fit_damp(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     return fit
 
 
+def mode_evidence(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> dict:
+    """Whether the measured-over-model magnitude where an added mode acts shows the ``model:mode`` ``fit``
+    beside ``effects``: over the coherent bins of :func:`hasel.effects.evidence.response_ratio` from a fifth
+    of the mode's frequency to twice it (the mode may lie above the excited band; its tail below it raises the
+    magnitude, about ``+0.3 dB`` at a fifth of its frequency), the median absolute magnitude (dB; the median: the
+    bins at the coherent band's edge scatter by 1-2 dB, ``multi2.py`` seed 21, case 3) without the load is at least
+    :data:`MODE_MIN_DB` and the model with ``fit`` leaves at most half of it, and below :data:`MODE_RISE_BELOW`
+    times the mode's frequency the magnitude rose (its median signed change, dB, is positive: a lightly damped
+    mode lifts the response below it; a delay moves no magnitude, a lag only lowers it).
+
+    Returns ``{"band_hz", "n_bins", "db_without", "db_with", "rise_below_db", "shown"}``."""
+    from hasel.effects.evidence import response_ratio
+
+    f_hz = mode_of(fit)[0]
+
+    def med_db(eff: dict[str, EffectFit]) -> tuple[float, int, float]:
+        f, r = response_ratio(pipe, eff)
+        m = (f >= f_hz / 5.0) & (f <= 2.0 * f_hz)
+        if m.sum() < 4:
+            return float("nan"), int(m.sum()), float("nan")
+        db = 20.0 * np.log10(np.maximum(np.abs(r), 1e-300))
+        below = m & (f <= MODE_RISE_BELOW * f_hz)
+        rise = float(np.median(db[below])) if below.sum() >= 2 else float("nan")
+        return float(np.median(np.abs(db[m]))), int(m.sum()), rise
+
+    a, n, rise = med_db(effects)
+    b = med_db(_with(effects, fit))[0] if n >= 4 else float("nan")
+    shown = bool(np.isfinite(a) and np.isfinite(b) and a >= MODE_MIN_DB and b <= 0.5 * a
+                 and np.isfinite(rise) and rise > 0.0)
+    return {"band_hz": [f_hz / 5.0, 2.0 * f_hz], "n_bins": n, "db_without": a, "db_with": b,
+            "rise_below_db": rise, "shown": shown}
+
+
+def _mode_shown(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> bool:
+    """:func:`mode_evidence`'s verdict."""
+    return mode_evidence(pipe, effects, fit)["shown"]
+
+
+def _refine_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit, max_nfev: int = 30) -> EffectFit:
+    """``fit`` (``model:mode``) refined by bounded least squares on the training residual over ``kappa``, the
+    mode's frequency and damping ratio, the mass ratio held (at 0: the model's own resonances kept)."""
+    from scipy import optimize
+
+    lo, hi = FAMILY.bounds(pipe, fit)
+    th0 = np.asarray(fit.theta, float)
+
+    def full(x: np.ndarray) -> EffectFit:
+        return EffectFit("load_mass", fit.variant, (float(th0[0]), float(x[0]), float(x[1]), float(x[2])))
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return pipe.residuals(_with(effects, full(x)), "train")
+
+    x0 = np.clip(th0[1:4], lo[1:4], hi[1:4])
+    try:
+        res = optimize.least_squares(fun, x0, bounds=(lo[1:4], hi[1:4]), method="trf", max_nfev=max_nfev,
+                                     x_scale=np.array([0.1, 0.1 * x0[1], 0.05]), diff_step=1e-3)
+    except (ValueError, np.linalg.LinAlgError):
+        return fit
+    cand = full(res.x)
+    return cand if 2.0 * res.cost <= _sse(pipe, _with(effects, fit)) else fit
+
+
+def _mode_possible(pipe: FitContext, effects: dict[str, EffectFit], fres: float) -> bool:
+    """A cheap screen before the ``model:mode`` fit (one :func:`hasel.effects.evidence.response_ratio`): whether the
+    measured-over-model magnitude (``effects`` in place) moves where any mode within the bounds would act (bins at
+    or above ``MODE_RATIO_MIN / 5`` times the resonance ``fres``, Hz): its upper quartile of the absolute change
+    (dB) at least :data:`MODE_MIN_DB` (the upper quartile, not :func:`mode_evidence`'s median: that band is wider
+    than a mode's own, a mode's tail moves the top of it only). Without four such bins: False."""
+    from hasel.effects.evidence import response_ratio
+
+    f, r = response_ratio(pipe, effects)
+    m = f >= MODE_RATIO_MIN * fres / 5.0
+    if m.sum() < 4:
+        return False
+    return float(np.quantile(np.abs(20.0 * np.log10(np.maximum(np.abs(r[m]), 1e-300))), 0.75)) >= MODE_MIN_DB
+
+
+def _fit_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
+    """The ``model:mode`` form (an added pole pair above the resonance, the model's resonances and static gain
+    kept) in place of ``fit`` when it lowers the training BIC (noise variance unknown; at least one parameter's
+    worth, two when ``fit`` has two) and the magnitude near the mode's frequency shows it (:func:`_mode_shown`);
+    else ``fit``. Grid of :data:`MODE_GRID` x :data:`MODE_ZETA_GRID` with ``kappa`` by least squares, the best
+    start refined (:func:`_refine_mode`)."""
+    fres = resonance_hz(pipe.den)
+    if not _mode_possible(pipe, effects, fres):
+        return fit
+    starts = [_kappa_ls(pipe, effects, "model:mode", (0.0,), (fres * r, z)) for r in MODE_GRID for z in MODE_ZETA_GRID]
+    costs = [_sse(pipe, _with(effects, f)) for f in starts]
+    mode = _refine_mode(pipe, effects, starts[int(np.argmin(costs))])
+    n = pipe.residuals(_with(effects, fit), "train").size
+    s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, mode))
+    extra = max(1, 3 - len(fit.theta))
+    if n > 1 and s1 > 0 and n * math.log(s0 / s1) > extra * math.log(n) and _mode_shown(pipe, effects, mode):
+        return mode
+    return fit
+
+
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best: dict[str, tuple[float, EffectFit]] = {}
     # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; each form's
@@ -293,6 +438,8 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         fit = next(f for f in refined if not keeps_zeta(f))
     if DAMP_FORM and _has_resonance(pipe):
         fit = _fit_damp(pipe, effects, fit)
+    if MODE_FORM and _has_resonance(pipe):
+        fit = _fit_mode(pipe, effects, fit)
     # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
     # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
     # kept when it lowers the training BIC (one more parameter, noise variance unknown)
@@ -320,20 +467,23 @@ class LoadFamily(EffectFamily):
                         "resonance's magnitude in proportion to the mass, another change of the dynamics does not")
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
-        """``("mass_ratio", "gain_factor"[, "damping_factor"][, "offset"])``."""
+        """``("mass_ratio", "gain_factor"[, "damping_factor" | "mode_hz", "mode_damping_ratio"][, "offset"])``."""
         return (("mass_ratio", "gain_factor") + (("damping_factor",) if damping_factor(fit) is not None else ())
+                + (("mode_hz", "mode_damping_ratio") if mode_of(fit) is not None else ())
                 + (("offset",) if "sag" in fit.variant.split(":") else ()))
 
     def transform(self, num, den, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """The linear model ``num/den`` with the load: heavier (or otherwise damped) resonances, gain ``kappa``."""
+        """The linear model ``num/den`` with the load: heavier (or otherwise damped) resonances, an added mode,
+        gain ``kappa``."""
         mu, kappa = fit.theta[:2]
         return np.asarray(num, float) * kappa, loaded_den(den, mu, zeta_kept=keeps_zeta(fit),
-                                                          damping=damping_factor(fit))
+                                                          damping=damping_factor(fit), mode=mode_of(fit))
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LinearStage:
         """The loaded linear model ``scales.num/den`` (the nominal) with its gain and sag."""
         num, den = getattr(scales, "num"), getattr(scales, "den")
-        return LinearStage(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit), damping=damping_factor(fit)),
+        return LinearStage(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit), damping=damping_factor(fit),
+                                           mode=mode_of(fit)),
                            dt_s, gain=fit.theta[1], offset=load_offset(fit))
 
     def truth_stage(self, effect: Effect, dt_s: float) -> SagStage:
@@ -347,13 +497,22 @@ class LoadFamily(EffectFamily):
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """``-0.8 <= mu <= 10`` (damping-ratio-kept and damping forms: ``mu <= ZETA_MU_MAX``),
-        ``0.05 <= kappa <= 20``, ``DAMP_MIN <= delta <= DAMP_MAX``, ``sag <= 0``."""
+        ``0.05 <= kappa <= 20``, ``DAMP_MIN <= delta <= DAMP_MAX``, the added mode's frequency (Hz) within
+        ``MODE_RATIO_MIN``-``MODE_RATIO_MAX`` times the model's resonance (of its slowest pole without one) and its
+        damping ratio within ``MODE_ZETA_MIN``-``MODE_ZETA_MAX``, ``sag <= 0``."""
         damp = damping_factor(fit) is not None
         hi_mu = ZETA_MU_MAX if keeps_zeta(fit) or damp else 10.0
         lo, hi = [-0.8, 0.05], [hi_mu, 20.0]
         if damp:
             lo.append(DAMP_MIN)
             hi.append(DAMP_MAX)
+        if mode_of(fit) is not None:
+            den = np.asarray(getattr(ctx, "den"), float)
+            fres = resonance_hz(den)
+            if not math.isfinite(fres):
+                fres = float(np.min(np.abs(np.roots(den)))) / (2.0 * math.pi)
+            lo += [MODE_RATIO_MIN * fres, MODE_ZETA_MIN]
+            hi += [MODE_RATIO_MAX * fres, MODE_ZETA_MAX]
         if "sag" in fit.variant.split(":"):
             lo.append(-np.inf)
             hi.append(0.0)
@@ -362,7 +521,8 @@ class LoadFamily(EffectFamily):
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
         """Mass ratio, gain factor, the resonance's factor (frequency, dimensionless), the damping factor and the
-        damping ratios (dimensionless, ``model:damp``) and the sag (output unit)."""
+        damping ratios (dimensionless, ``model:damp``), the added mode's frequency (Hz), damping ratio and ratio
+        to the model's resonance (``model:mode``) and the sag (output unit)."""
         th = fit.theta
         d = damping_factor(fit)
         out: dict = {"variant": fit.variant, "form": ("resonances' frequency lowered, damping ratio kept"
@@ -370,6 +530,9 @@ class LoadFamily(EffectFamily):
                                                       "resonances' frequency over sqrt(1 + mass_ratio), damping ratio "
                                                       "times damping_factor (the mount's damping changed)"
                                                       if d is not None else
+                                                      "an added mode: a pole pair of frequency mode_hz and damping "
+                                                      "ratio mode_damping_ratio above the resonance, static gain kept"
+                                                      if mode_of(fit) is not None else
                                                       "resonances' inertia: frequency and damping ratio fall together"),
                      "mass_ratio": th[0], "gain_factor": th[1],
                      "resonance_factor": 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")}
@@ -384,6 +547,12 @@ class LoadFamily(EffectFamily):
                     z0 = float(-r.real / np.abs(r))
                     out["damping_ratio_model"] = z0
                     out["damping_ratio_loaded"] = z0 * d
+        md = mode_of(fit)
+        if md is not None:
+            out["mode_hz"], out["mode_damping_ratio"] = md
+            den = getattr(ctx, "den", None)
+            fres = resonance_hz(den) if den is not None else float("nan")
+            out["mode_over_resonance"] = md[0] / fres if math.isfinite(fres) else float("nan")
         if "sag" in fit.variant.split(":"):
             out["offset"] = load_offset(fit)
             out["offset_unit"] = units[1]
