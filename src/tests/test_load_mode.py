@@ -17,6 +17,7 @@ from scipy import signal
 from hasel import paper
 from hasel.diagnose import diagnose
 from hasel.effects.base import EffectFit
+from hasel.effects import load
 from hasel.effects.registry import FAMILIES
 
 RATE_HZ = 500.0
@@ -68,7 +69,7 @@ def test_the_mode_form_is_the_truths_plant_and_runs_in_chunks():
         den = den0
 
     lo, hi = fam.bounds(Ctx(), fit)
-    assert lo[2] == pytest.approx(1.05 * F_RES_HZ, rel=1e-6) and hi[2] == pytest.approx(8.0 * F_RES_HZ, rel=1e-6)
+    assert lo[2] == pytest.approx(load.MODE_RATIO_MIN * F_RES_HZ, rel=1e-6) and hi[2] == pytest.approx(8.0 * F_RES_HZ, rel=1e-6)
     assert lo[3] == 0.05 and hi[3] == 0.6
 
     class Scales:
@@ -107,4 +108,22 @@ def test_no_mode_on_an_effect_free_or_a_delayed_log(delay_s, seed):
     t, u, y, model = _log((num, den), seed, delay_s=delay_s)
     v = diagnose(t, u, y, model=model, units=("kV", "mm"))
     assert v.names == ([] if delay_s == 0 else ["time_delay"])
-    assert not any(e["name"] == "load_mass" and "mode" in e["params"]["variant"] for e in v.effects)
+    assert not any(e["name"] == "load_mass" and "mode" in e["params"]["variant"].split(":") for e in v.effects)
+
+
+def test_a_delay_beside_a_heavier_mass_is_not_taken_for_a_mode():
+    """A 6 ms delay beside a mass that lowers both of P(s)'s resonances by 15 % (their ``s^2`` terms times
+    1.38; written here from P(s)'s own factors): the delay's lag within the band could be fitted as an added mode
+    near the resonance, but a delay beside the heavier mass fits as well, so the verdict keeps the two
+    (``loads.py`` seed 3, case 14, had lost its delay to a mode at 1.08x the resonance)."""
+    num, den = paper.plant_tf()
+    w2 = paper.P_NOTCH_RAD_S ** 2
+    quad = np.array([1.38, 230.0, w2])
+    heavy = np.polymul(np.polymul([1, 18.85], [1, 56.55]), np.polymul(quad, quad))
+    t, u, y, model = _log((num, heavy), 5, delay_s=0.006)
+    v = diagnose(t, u, y, model=model, units=("kV", "mm"))
+    assert set(v.names) == {"load_mass", "time_delay"}
+    p = next(e for e in v.effects if e["name"] == "load_mass")["params"]
+    assert "mode" not in p["variant"].split(":")
+    d = next(e for e in v.effects if e["name"] == "time_delay")["params"]
+    assert abs(d["delay_s"] - 0.006) < 0.002
