@@ -561,7 +561,8 @@ def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
                     f"{ctx.to_nrmse(a[0]):.4f})")
             st.rounds[-1].setdefault("swaps", []).append({"out": old, "in": a[2], "nrmse_validation": ctx.to_nrmse(a[0])})
             swapped = {(a[2] if k2 == old else k2): (a[3] if k2 == old else v) for k2, v in st.current.items()}
-            st.evidence_of[a[2]] = st.evidence_of.pop(old)
+            # an effect set before the rounds (a measured pile-up's clip) has no evidence entry of its own
+            st.evidence_of[a[2]] = st.evidence_of.pop(old, (0.0, None))
             st.adopt(swapped, a[4], a[0], a[5])
 
 
