@@ -11,8 +11,7 @@ nominal: ``RESULT-h-triples.md``, case 07).
 """
 from __future__ import annotations
 
-import math
-
+import designs
 import numpy as np
 import pytest
 from scipy import signal
@@ -37,18 +36,8 @@ def _damped_plant(f: float, m: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _log(f: float, m: float, seed: int, noise_mm: float = 0.004, dur_s: float = 16.0):
-    """A multisine (0.3-40 Hz, 12 tones, about 4 kV) through the damped plant, white noise, 12-bit laser."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(dur_s * RATE_HZ)) / RATE_HZ
-    freqs = np.geomspace(0.3, 40.0, 12)
-    u = 4.0 + sum(0.5 * np.sin(2 * np.pi * fk * t + rng.uniform(0, 2 * np.pi)) for fk in freqs) / math.sqrt(3.0)
-    b, a, _ = signal.cont2discrete(_damped_plant(f, m), 1.0 / RATE_HZ, method="zoh")
-    b = np.ravel(b)
-    y = signal.lfilter(b, a, u, zi=signal.lfilter_zi(b, a) * u[0])[0]
-    lsb = 10.0 * 3.0 / 4096
-    y = np.round((y + noise_mm * rng.standard_normal(u.size)) / lsb) * lsb
-    num, den = paper.plant_tf()
-    return t, u, y, {"num": num.tolist(), "den": den.tolist()}
+    """:func:`designs.multisine_through` the damped plant at this file's rate."""
+    return designs.multisine_through(_damped_plant(f, m), seed, RATE_HZ, 0.0, noise_mm, dur_s)
 
 
 def test_the_damping_form_is_the_truths_plant():

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import designs
 import numpy as np
 import pytest
 from scipy import signal
@@ -32,21 +33,8 @@ def _mode_plant(f_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _log(plant, seed: int, delay_s: float = 0.0, noise_mm: float = 0.004, dur_s: float = 16.0):
-    """A multisine (0.3-40 Hz, 12 tones, about 4 kV) through ``plant`` (after a pure delay of ``delay_s``, whole
-    samples), white noise, 12-bit laser."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(dur_s * RATE_HZ)) / RATE_HZ
-    freqs = np.geomspace(0.3, 40.0, 12)
-    u = 4.0 + sum(0.5 * np.sin(2 * np.pi * fk * t + rng.uniform(0, 2 * np.pi)) for fk in freqs) / math.sqrt(3.0)
-    k = int(round(delay_s * RATE_HZ))
-    x = np.concatenate([np.full(k, u[0]), u[: u.size - k]]) if k else u
-    b, a, _ = signal.cont2discrete(plant, 1.0 / RATE_HZ, method="zoh")
-    b = np.ravel(b)
-    y = signal.lfilter(b, a, x, zi=signal.lfilter_zi(b, a) * x[0])[0]
-    lsb = 10.0 * 3.0 / 4096
-    y = np.round((y + noise_mm * rng.standard_normal(u.size)) / lsb) * lsb
-    num, den = paper.plant_tf()
-    return t, u, y, {"num": num.tolist(), "den": den.tolist()}
+    """:func:`designs.multisine_through` at this file's rate."""
+    return designs.multisine_through(plant, seed, RATE_HZ, delay_s, noise_mm, dur_s)
 
 
 def test_the_mode_form_is_the_truths_plant_and_runs_in_chunks():
