@@ -103,6 +103,14 @@ INPUT_SIDE = ("time_delay", "saturation", "static_nonlinearity", "hysteresis")
 _SLOT = SLOT_ORDER
 
 
+def _load_form(f: "EffectFit | None") -> tuple:
+    """The arguments of :meth:`Pipeline.loaded` for the load fit ``f`` (None: no load): mass ratio, gain
+    factor, damping ratio kept, damping factor (or None) and added mode ``(Hz, damping ratio)`` (or None)."""
+    if f is None:
+        return 0.0, 1.0, False, None, None
+    return float(f.theta[0]), float(f.theta[1]), keeps_zeta(f), damping_factor(f), mode_of(f)
+
+
 @dataclass
 class Pipeline:
     """The nominal model plus augmentations, simulated on the prepared records.
@@ -183,10 +191,8 @@ class Pipeline:
 
     def linear_of(self, effects: dict[str, "EffectFit"]) -> "LinearSim | _Scaled":
         """The linear part of the chain for ``effects`` (re-identified model and load included)."""
-        f = effects.get("load_mass")
-        mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
-        return self.loaded(mu, kappa, effects.get(LINEAR), f is not None and keeps_zeta(f),
-                           damping_factor(f) if f is not None else None, mode_of(f) if f is not None else None)
+        mu, kappa, zk, dk, md = _load_form(effects.get("load_mass"))
+        return self.loaded(mu, kappa, effects.get(LINEAR), zk, dk, md)
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -256,10 +262,7 @@ class Pipeline:
             x = apply_input(f, x, self.u_c, self.u_s)
         out["x_eff"] = x
         f = e.get("load_mass")
-        mu, kappa = (f.theta[:2] if f is not None else (0.0, 1.0))
-        zk = f is not None and keeps_zeta(f)
-        dk = damping_factor(f) if f is not None else None
-        md = mode_of(f) if f is not None else None
+        mu, kappa, zk, dk, md = _load_form(f)
         lin = e.get(LINEAR)
         key += ("l", mu, kappa, zk, dk, md) + (lin.theta if lin is not None else ())
         sim = self.loaded(mu, kappa, lin, zk, dk, md)

@@ -243,6 +243,11 @@ class SagStage:
         return x - self.sag if self.sag else x
 
 
+def _db(ratio: np.ndarray) -> np.ndarray:
+    """The magnitude of a frequency-response ratio in dB (``20 log10 |ratio|``, floored at 1e-300)."""
+    return 20.0 * np.log10(np.maximum(np.abs(ratio), 1e-300))
+
+
 def resonance_signature(freqs_hz: np.ndarray, ratio: np.ndarray, f_res_hz: float) -> dict:
     """Where a frequency-response ratio (measured over nominal) moves the response.
 
@@ -253,7 +258,7 @@ def resonance_signature(freqs_hz: np.ndarray, ratio: np.ndarray, f_res_hz: float
     """
     f = np.asarray(freqs_hz, float)
     r = np.asarray(ratio, complex)
-    mag = 20 * np.log10(np.maximum(np.abs(r), 1e-300))
+    mag = _db(r)
     ph = np.degrees(np.unwrap(np.angle(r)))
     near = (f >= f_res_hz / 2) & (f <= 2 * f_res_hz)
     low = f < f_res_hz / 2
@@ -340,7 +345,7 @@ def mode_evidence(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFi
         m = (f >= f_hz / 5.0) & (f <= 2.0 * f_hz)
         if m.sum() < 4:
             return float("nan"), int(m.sum()), float("nan")
-        db = 20.0 * np.log10(np.maximum(np.abs(r), 1e-300))
+        db = _db(r)
         below = m & (f <= MODE_RISE_BELOW * f_hz)
         rise = float(np.median(db[below])) if below.sum() >= 2 else float("nan")
         return float(np.median(np.abs(db[m]))), int(m.sum()), rise
@@ -394,7 +399,7 @@ def _mode_possible(pipe: FitContext, effects: dict[str, EffectFit], fres: float)
     m = f >= MODE_RATIO_MIN * fres / 5.0
     if m.sum() < 4:
         return False
-    return float(np.quantile(np.abs(20.0 * np.log10(np.maximum(np.abs(r[m]), 1e-300))), 0.75)) >= MODE_MIN_DB
+    return float(np.quantile(np.abs(_db(r[m])), 0.75)) >= MODE_MIN_DB
 
 
 def _fit_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
@@ -411,8 +416,7 @@ def _fit_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     mode = _refine_mode(pipe, effects, starts[int(np.argmin(costs))])
     n = pipe.residuals(_with(effects, fit), "train").size
     s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, mode))
-    extra = max(1, 3 - len(fit.theta))
-    if n > 1 and s1 > 0 and n * math.log(s0 / s1) > extra * math.log(n) and _mode_shown(pipe, effects, mode):
+    if bic_prefers(n, s0, s1, max(1, 3 - len(fit.theta))) and _mode_shown(pipe, effects, mode):
         return mode
     return fit
 
