@@ -115,6 +115,34 @@ def multisine_through(plant, seed: int, rate_hz: float = 500.0, delay_s: float =
     return t, u, y, {"num": num.tolist(), "den": den.tolist()}
 
 
+def cosine_chirp(rate_hz: float = 500.0, dur_s: float = 20.0) -> np.ndarray:
+    """Raised-cosine log chirp 0.2-20 Hz between 0 and 7 kV (kV), ``dur_s`` at ``rate_hz`` (a HASEL driven from
+    0 kV, as the static-map form tests use)."""
+    t = np.arange(int(dur_s * rate_hz)) / rate_hz
+    f0, f1 = 0.2, 20.0
+    ph = 2 * np.pi * f0 * dur_s / np.log(f1 / f0) * (np.exp(t / dur_s * np.log(f1 / f0)) - 1.0)
+    return 3.5 * (1.0 - np.cos(ph))
+
+
+def zoh_stroke(v: np.ndarray, rate_hz: float = 500.0) -> np.ndarray:
+    """``v`` (kV) through P(s), scipy's zero-order hold at ``rate_hz``, from rest at ``v[0]`` (mm)."""
+    num, den = paper.plant_tf()
+    b, a, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method="zoh")
+    b = np.ravel(b)
+    return signal.lfilter(b, a, v, zi=signal.lfilter_zi(b, a) * v[0])[0]
+
+
+def diagnose_noisy(u: np.ndarray, z: np.ndarray, seed: int, rate_hz: float = 500.0, noise_mm: float = 0.005):
+    """``hasel.diagnose`` of input ``u`` (kV) against the stroke ``z`` (mm) plus white noise of ``noise_mm`` drawn
+    from ``seed``, sampled at ``rate_hz``, with the exact P(s) as the nominal model."""
+    from hasel.diagnose import diagnose
+
+    y = z + noise_mm * np.random.default_rng(seed).standard_normal(u.size)
+    num, den = paper.plant_tf()
+    return diagnose(np.arange(u.size) / rate_hz, u, y, model={"num": num.tolist(), "den": den.tolist()},
+                    units=("kV", "mm"))
+
+
 def _chirp_per_offset(kind: str, rate_hz: float, rng: np.random.Generator,
                       hold_s: tuple[float, float] = (0.05, 1.0)) -> np.ndarray:
     if kind in ("paper_chirp", "paper_chirp3"):

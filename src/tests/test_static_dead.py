@@ -19,42 +19,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import signal
 
 from hasel import paper
-from hasel.diagnose import diagnose
 from hasel.effects.base import EffectFit, run_chunked
 from hasel.effects.fitkit import bic_prefers
 from hasel.effects.registry import family
 from hasel.effects.static_map import DEAD, dead_map, dead_visited, dead_zone_shares
+
+from designs import cosine_chirp, diagnose_noisy, zoh_stroke
 
 RATE = 500.0
 DUR = 20.0
 NOISE_MM = 0.005
 
 
-def _chirp() -> np.ndarray:
-    """Raised-cosine log chirp 0.2-20 Hz between 0 and 7 kV (kV)."""
-    t = np.arange(int(DUR * RATE)) / RATE
-    f0, f1 = 0.2, 20.0
-    ph = 2 * np.pi * f0 * DUR / np.log(f1 / f0) * (np.exp(t / DUR * np.log(f1 / f0)) - 1.0)
-    return 3.5 * (1.0 - np.cos(ph))
-
-
-def _stroke(v: np.ndarray) -> np.ndarray:
-    """``v`` (kV) through P(s), zero-order hold at RATE, from rest at ``v[0]`` (mm)."""
-    num, den = paper.plant_tf()
-    b, a, _ = signal.cont2discrete((num, den), 1.0 / RATE, method="zoh")
-    b = np.ravel(b)
-    return signal.lfilter(b, a, v, zi=signal.lfilter_zi(b, a) * v[0])[0]
-
-
 def _diagnose(u: np.ndarray, z: np.ndarray, seed: int):
-    rng = np.random.default_rng(seed)
-    y = z + NOISE_MM * rng.standard_normal(u.size)
-    num, den = paper.plant_tf()
-    return diagnose(np.arange(u.size) / RATE, u, y, model={"num": num.tolist(), "den": den.tolist()},
-                    units=("kV", "mm"))
+    """The diagnosis of this file's log (RATE, NOISE_MM white noise from ``seed``, exact P(s))."""
+    return diagnose_noisy(u, z, seed, RATE, NOISE_MM)
 
 
 THRESHOLD_KV = 0.8
@@ -63,22 +44,22 @@ GAIN = 6.0 / (6.0 - THRESHOLD_KV)
 
 @pytest.fixture(scope="module")
 def dead_band():
-    u = _chirp()
+    u = cosine_chirp(RATE, DUR)
     v = np.sign(u) * np.maximum(np.abs(u) - THRESHOLD_KV, 0.0) * GAIN
-    return _diagnose(u, _stroke(v), 1)
+    return _diagnose(u, zoh_stroke(v, RATE), 1)
 
 
 @pytest.fixture(scope="module")
 def sensor_curve():
-    u = _chirp()
-    z = _stroke(u)
+    u = cosine_chirp(RATE, DUR)
+    z = zoh_stroke(u, RATE)
     return _diagnose(u, 12.0 * np.tanh(z / 12.0), 2)
 
 
 @pytest.fixture(scope="module")
 def free_log():
-    u = _chirp()
-    return _diagnose(u, _stroke(u), 3)
+    u = cosine_chirp(RATE, DUR)
+    return _diagnose(u, zoh_stroke(u, RATE), 3)
 
 
 def test_a_dead_band_is_named_with_its_threshold(dead_band):
@@ -105,8 +86,8 @@ def test_an_effect_free_log_is_not_given_the_form(free_log):
     from hasel.diagnose.prep import prepare
 
     assert free_log.names == []
-    u = _chirp()
-    y = _stroke(u) + NOISE_MM * np.random.default_rng(3).standard_normal(u.size)
+    u = cosine_chirp(RATE, DUR)
+    y = zoh_stroke(u, RATE) + NOISE_MM * np.random.default_rng(3).standard_normal(u.size)
     num, den = paper.plant_tf()
     pipe = Pipeline(prepare(np.arange(u.size) / RATE, u, y, model_den=den), num, den)
     fit = family("static_nonlinearity").fit(pipe, {})
@@ -120,7 +101,7 @@ def test_the_dead_band_form_runs_in_chunks_and_is_described_with_units():
     fit = EffectFit("static_nonlinearity", DEAD, (0.8, 1.15, 0.03))
     assert fam.param_names(fit) == ("threshold", "gain", "width") and fit.slot == 2
     sc = SimpleNamespace(u_c=3.5, u_s=3.5, y_c=4.0, y_s=3.0)
-    x = _chirp()
+    x = cosine_chirp(RATE, DUR)
     whole = fam.simulate(fit, x, sc, 1.0 / RATE)
     np.testing.assert_array_equal(run_chunked(fam.stage(fit, sc, 1.0 / RATE), x, 10), whole)
     # nothing below the threshold, the gain beyond it, odd through 0 kV
@@ -137,9 +118,10 @@ def test_a_bend_without_a_flat_zone_in_reach_is_the_polynomials():
     from hasel.effects import static_map as sm
     from hasel.effects.fitkit import _sse, _with
 
-    u = 1.5 + _chirp() * (5.5 / 7.0)  # 1.5-7 kV: the band's flat zone (below 2.2 - 2.2 * 0.5 kV) never reached
+    # 1.5-7 kV: the band's flat zone (below 2.2 - 2.2 * 0.5 kV) never reached
+    u = 1.5 + cosine_chirp(RATE, DUR) * (5.5 / 7.0)
     truth = (2.2, 1.4, 0.5)
-    y = _stroke(dead_map(truth, u)) + NOISE_MM * np.random.default_rng(4).standard_normal(u.size)
+    y = zoh_stroke(dead_map(truth, u), RATE) + NOISE_MM * np.random.default_rng(4).standard_normal(u.size)
     num, den = paper.plant_tf()
     pipe = Pipeline(prepare(np.arange(u.size) / RATE, u, y, model_den=den), num, den)
     dead = sm.fit_dead(pipe, {})
