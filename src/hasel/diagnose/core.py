@@ -550,10 +550,7 @@ def _adopt_candidate(ctx: _Context, st: _State, results: list[Candidate], best: 
 def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
     """Stage: with the newcomer ``name`` in place, swap an earlier choice for another family that
     lowers the validation error below ``opts.swap_ratio`` of it."""
-    # a saturation where the measured output piles up on one value is seen directly in the data: not swapped out
-    # (the cascaded tanks' overflow; on h-knee a knee of the input map replaced it at the swap ratio)
-    for old in [n for n, v in st.current.items() if n != name and not _fixed(n, v)
-                and not (n == "saturation" and ctx.pipe.clips)]:
+    for old in [n for n, v in st.current.items() if n != name and not _fixed(n, v)]:
         base = {k2: v for k2, v in st.current.items() if k2 != old}
         alts = [a for a in _fit_candidates(ctx, base, [f for f in FAMILIES if f not in st.current])
                 if not linear_static(ctx.pipe, a[6])

@@ -22,9 +22,6 @@ Forms
   tuning simulator's knees are piecewise linear, which a degree-5 polynomial follows poorly; the dead band's
   corner (:func:`dead_map`, reused) beside a line is that form. :func:`fit_after_hysteresis` fits both and
   keeps the one with the lower validation error.
-- generic ``input:knee`` (``theta = (a_0, a_1, threshold_kv, gain, width_kv)``): the same knee on the input,
-  before the dynamics (no hysteresis needed). :func:`fit_input_side` fits it beside the polynomial and the dead
-  band and keeps the form of lowest training BIC (a knee has five parameters, the polynomial up to six).
 - generic ``input:dead`` (``theta = (threshold_kv, gain, width_kv)``, input units): a dead band before the
   dynamics, ``g (w sp((x - d) / w) - w sp((-x - d) / w))``, ``sp(a) = log(1 + e^a)`` (:func:`dead_map`):
   nothing passes below the threshold ``d`` (a HASEL does not move until the field overcomes the film's
@@ -41,7 +38,6 @@ is a linear correction, not a nonlinearity (:func:`linear_static`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -54,7 +50,7 @@ from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
-__all__ = ["AFTER_HYST", "AFTER_HYST_KNEE", "fit_after_hysteresis", "fit_knee_after_hysteresis", "fit_knee", "knee_map", "knee_moderate", "INPUT_KNEE", "KNEES", "KNEE_RATIO_MIN",
+__all__ = ["AFTER_HYST", "AFTER_HYST_KNEE", "fit_after_hysteresis", "fit_knee_after_hysteresis", "knee_map",
            "is_after_hysteresis", "KNEE_GRID_QUANTILES", "StaticNonlinearity", "MapStage", "fit_variant", "fit_dead", "fit_input_side", "dead_map", "dead_slope", "dead_zone_shares", "dead_visited",
            "dead_flat_share", "apply_input",
            "DEAD", "DEAD_GRID_QUANTILES", "map_sides", "InternalMapStage", "max_degree", "describe_dead", "linear_static", "NEAR_LINEAR_SHARE", "CURVE_LEFT_SHARE",
@@ -89,17 +85,6 @@ AFTER_HYST_KNEE = AFTER_HYST + ":knee"
 KNEE_GRID_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 #: The dead-band form's variant (an input-side map: the chain's input slot).
 DEAD = "input:dead"
-#: The knee form of the input-side map (:func:`knee_map` on the input, the chain's input slot): a line whose slope
-#: changes at one corner. A piecewise-linear knee (the tuning maps of ``bench/tune_diag/maps.py``, ``combos.py`` and
-#: ``modes.py``: the slope times 0.5-1.9 beyond 3.5-4.3 kV) is followed poorly by a degree-5 polynomial, and a
-#: sensor curve, an end stop or a clip took its place in 8 of the 16 static maps the 14 tuning sets missed.
-INPUT_KNEE = "input:knee"
-#: Least ratio of the input knee's slopes (beyond the corner over below it, and its inverse): a knee flatter than
-#: that beyond its corner is a clip, the saturation family's (``combos.py`` seed 21 cases 11 and 12 and the cascaded
-#: tanks' overflow were taken for knees of slope ratio -0.01 to 0.09); the tuning knees are 0.5-1.9.
-KNEE_RATIO_MIN = 0.25
-#: The knee variants (the input's and the hysteresis output's), and the stage each is fitted on.
-KNEES = {INPUT_KNEE: "x_map", AFTER_HYST_KNEE: "x_hyst"}
 #: Starting thresholds of the dead band: these quantiles of the map's input ``|x|`` over the training
 #: samples (a threshold must have samples below it to be seen; the search's bound is the 0.6 quantile).
 #: Set on ``bench/tune_diag/deadzones.py`` seed 1 and ``multi2.py`` seed 21 (thresholds 0.2-2 kV on
@@ -249,7 +234,7 @@ def apply_input(fit: EffectFit, x: np.ndarray, u_c: float, u_s: float) -> np.nda
     :data:`DEAD`) or the polynomial (variant ``"input"`` or :data:`AFTER_HYST`, normalised by ``u_c``, ``u_s``)."""
     if fit.variant == DEAD:
         return dead_map(fit.theta, x)
-    if fit.variant in KNEES:
+    if fit.variant == AFTER_HYST_KNEE:
         return knee_map(fit.theta, x, u_c, u_s)
     return input_map(fit.theta, x, u_c, u_s)
 
@@ -383,71 +368,38 @@ def fit_dead(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | Non
 
 
 def fit_input_side(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit:
-    """The input-side map with ``effects`` fixed: the polynomial (:func:`fit_variant`), the dead band
-    (:func:`fit_dead`) or the knee (:func:`fit_knee`), whichever has the lowest training BIC (noise variance
-    unknown; the forms have 3, 5 and up to 6 parameters). The knee is offered only with a slope on both sides of its
-    corner (:func:`knee_moderate`). The dead band and the knee are offered only when they
-    are not nearly a line (:func:`linear_static`'s rule: a corner the input never crosses is a gain and an offset,
-    the load's and the polynomial's); the dead band only when the data see its flat zone at least as often as
-    its corner (:func:`dead_visited`: else the data see a bend, a curve the polynomial describes)."""
+    """The input-side map with ``effects`` fixed: the polynomial (:func:`fit_variant`), or the dead band
+    (:func:`fit_dead`) when it lowers the training BIC and is not nearly a line (:func:`linear_static`'s
+    rule: a band the input never crosses is a gain and an offset, the load's and the polynomial's) and the
+    data see its flat zone at least as often as its corner (:func:`dead_visited`: else the data see a bend,
+    a curve the polynomial describes)."""
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     poly = fit_variant(pipe, effects, "input")
-    r = pipe.residuals(_with(base, poly), "train")
-    n, s_p = r.size, sumsq(r)
-    best, best_bic = poly, _bic(n, s_p, poly.n_params)
     dead = fit_dead(pipe, effects)
-    knee = fit_knee(pipe, effects, INPUT_KNEE)
-    x = _map_inputs(pipe, base) if dead is not None else None
-    for f in (dead, knee):
-        if f is None or (f.variant == DEAD and not dead_visited(f.theta, x)) or (f is knee and not knee_moderate(f)):
-            continue
-        s_f = _sse(pipe, _with(base, f))
-        b = _bic(n, s_f, f.n_params)
-        if (b < best_bic and bic_prefers(n, s_p, s_f, f.n_params - poly.n_params)
-                and not _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None, s_full=s_f)):
-            best, best_bic = f, b
-    return best
-
-
-def knee_moderate(fit: EffectFit) -> bool:
-    """Whether the knee ``fit`` (``theta = (a_0, a_1, d, g, w)``) keeps a slope on both sides of its corner: the
-    slope beyond it over the slope below it, ``(1 + a_1 + g) / (1 + a_1)``, within :data:`KNEE_RATIO_MIN` and its
-    inverse (flatter is a clip, steeper below a dead band)."""
-    below = 1.0 + float(fit.theta[1])
-    if below <= 0.0:
-        return False
-    r = (below + float(fit.theta[3])) / below
-    return KNEE_RATIO_MIN <= r <= 1.0 / KNEE_RATIO_MIN
-
-
-def _bic(n: int, sse: float, k: int) -> float:
-    """The BIC, up to a constant, of a fit with ``k`` parameters leaving the sum of squares ``sse`` on ``n``
-    samples (noise variance unknown): ``n log(sse) + k log(n)``."""
-    return n * math.log(max(sse, 1e-300)) + k * math.log(max(n, 2))
+    if dead is None or not dead_visited(dead.theta, _map_inputs(pipe, base)):
+        return poly
+    r = pipe.residuals(_with(base, dead), "train")
+    s_d = sumsq(r)
+    s_p = _sse(pipe, _with(base, poly))
+    if (bic_prefers(r.size, s_p, s_d, dead.n_params - poly.n_params)
+            and not _nearly_linear(pipe, base, "input", _static_basis(pipe, base, "input"), None, s_full=s_d)):
+        return dead
+    return poly
 
 
 def fit_knee_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    """The knee after the hysteresis (:data:`AFTER_HYST_KNEE`, :func:`knee_map`) with ``effects`` fixed
-    (:func:`fit_knee`). None without a hysteresis."""
-    if "hysteresis" not in effects:
+    """The knee after the hysteresis (:data:`AFTER_HYST_KNEE`, :func:`knee_map`) with ``effects`` fixed: corners
+    at the quantiles :data:`KNEE_GRID_QUANTILES` of the hysteresis output (training samples), the width at
+    :data:`DEAD_WIDTH_START` times ``u_s``, each with its offset, slope and change of slope by least squares on
+    the training residual (exact with nothing nonlinear after the map, else a start); the best refined by
+    nonlinear least squares (:data:`DEAD_REFINE_NFEV` evaluations, within :meth:`StaticMapFamily.bounds`).
+    None without a hysteresis or where the input holds fewer than three levels."""
+    if "hysteresis" not in effects or getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
         return None
-    return fit_knee(pipe, effects, AFTER_HYST_KNEE)
-
-
-def fit_knee(pipe: FitContext, effects: dict[str, EffectFit], variant: str = INPUT_KNEE) -> EffectFit | None:
-    """The knee ``variant`` (:data:`INPUT_KNEE` on the input, :data:`AFTER_HYST_KNEE` on the hysteresis output;
-    :func:`knee_map`) with ``effects`` fixed: corners at the quantiles :data:`KNEE_GRID_QUANTILES` of the map's
-    input ``|x|`` (training samples), the width at :data:`DEAD_WIDTH_START` times ``u_s``, each with its offset,
-    slope and change of slope by least squares on the training residual (exact with nothing nonlinear after the
-    map, else a start); the best refined by nonlinear least squares (:data:`DEAD_REFINE_NFEV` evaluations, within
-    :meth:`StaticMapFamily.bounds`). None where the input holds fewer than three levels."""
-    if getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
-        return None
-    key = KNEES[variant]
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     recs = [(ri, rec) for ri, rec in enumerate(pipe.prep.records) if rec.train.any()]
     sts = {ri: pipe.stages(base, ri) for ri, _ in recs}
-    xh = np.concatenate([sts[ri][key][rec.train] for ri, rec in recs] or [np.zeros(0)])
+    xh = np.concatenate([sts[ri]["x_hyst"][rec.train] for ri, rec in recs] or [np.zeros(0)])
     if xh.size < 10:
         return None
     grid = np.unique(np.round(np.quantile(np.abs(xh), KNEE_GRID_QUANTILES), 9))
@@ -460,7 +412,7 @@ def fit_knee(pipe: FitContext, effects: dict[str, EffectFit], variant: str = INP
     Ab = np.zeros((grid.size, 3))
     for ri, rec in recs:
         st, m = sts[ri], rec.train
-        x = st[key]
+        x = st["x_hyst"]
         b = (rec.y - st["y"])[m]
         c0 = sim.run(np.full(x.shape, pipe.u_s))[m]
         c1 = sim.run(x - pipe.u_c)[m]
@@ -480,7 +432,7 @@ def fit_knee(pipe: FitContext, effects: dict[str, EffectFit], variant: str = INP
             best, best_cost = (float(th[0]), float(th[1]), float(d), float(th[2]), float(w)), cost
     if best is None:
         return None
-    f0 = EffectFit("static_nonlinearity", variant, best)
+    f0 = EffectFit("static_nonlinearity", AFTER_HYST_KNEE, best)
     lo, hi = FAMILY.bounds(pipe, f0)
     return _refine(pipe, base, f0, lo, hi, max_nfev=DEAD_REFINE_NFEV,
                    x_scale=np.array([0.01, 0.05, 0.02 * pipe.u_s, 0.05, 0.01 * pipe.u_s]))
@@ -544,8 +496,8 @@ def linear_static(pipe: FitContext, effects: dict[str, EffectFit]) -> bool:
     if f is None or len(f.theta) <= 1:
         return False
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
-    if f.variant == DEAD or f.variant in KNEES:  # judged against its side's polynomial offset and line
-        side = AFTER_HYST if f.variant == AFTER_HYST_KNEE else "input"
+    if f.variant in (DEAD, AFTER_HYST_KNEE):  # judged against its side's polynomial offset and line
+        side = "input" if f.variant == DEAD else AFTER_HYST
         return _nearly_linear(pipe, base, side, _static_basis(pipe, base, side), None,
                               s_full=_sse(pipe, effects))
     return _nearly_linear(pipe, base, f.variant, _static_basis(pipe, base, f.variant), np.asarray(f.theta))
@@ -588,15 +540,15 @@ class StaticMapFamily(EffectFamily):
         "width")`` (input unit, factor, input unit)."""
         if fit.variant == DEAD:
             return ("threshold", "gain", "width")
-        if fit.variant in KNEES:
+        if fit.variant == AFTER_HYST_KNEE:
             return ("z^0", "z^1", "threshold", "gain", "width")
         return tuple(f"z^{j}" for j in range(len(fit.theta)))
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """The polynomials are free; the dead band's threshold lies in ``[0, u_c + u_s]`` (input unit), its
         gain in :data:`DEAD_GAIN_BOUNDS`, its width in :data:`DEAD_WIDTH_BOUNDS` times ``u_s``; the knee after the
-        hysteresis and on the input have the same threshold and width bounds, their line and change of slope free."""
-        if fit.variant in KNEES:
+        hysteresis has the same threshold and width bounds, its line and change of slope free."""
+        if fit.variant == AFTER_HYST_KNEE:
             inf = np.inf
             return (np.array([-inf, -inf, 0.0, -inf, DEAD_WIDTH_BOUNDS[0] * ctx.u_s]),
                     np.array([inf, inf, max(ctx.u_c + ctx.u_s, 1e-12), inf, DEAD_WIDTH_BOUNDS[1] * ctx.u_s]))
@@ -608,7 +560,7 @@ class StaticMapFamily(EffectFamily):
     def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds`, except the dead band's narrowest width: a hard corner is an ordinary value."""
         lo, hi = self.bounds(ctx, fit)
-        if fit.variant == DEAD or fit.variant in KNEES:
+        if fit.variant in (DEAD, AFTER_HYST_KNEE):
             lo = lo.copy()
             lo[2 if fit.variant == DEAD else 4] = -np.inf
         return lo, hi
@@ -638,7 +590,7 @@ class StaticMapFamily(EffectFamily):
         for the dead band its threshold, gain and width with units."""
         if fit.variant == DEAD:
             return describe_dead(ctx, fit, units, effects)
-        if fit.variant in KNEES:
+        if fit.variant == AFTER_HYST_KNEE:
             return describe_knee(ctx, fit, units, effects)
         out = describe_poly(ctx, fit, units)
         ins = fit.variant in ("input", AFTER_HYST)
@@ -699,9 +651,9 @@ def describe_dead(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effec
 
 
 def describe_knee(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effects: dict[str, EffectFit]) -> dict:
-    """A knee's description (on the input or after the hysteresis): offset and slope change (dimensionless),
-    threshold and width (input unit), the map's deviation on 9 points (input unit) and the output offset at the
-    input's centre (output unit)."""
+    """The knee after the hysteresis's description: offset and slope change (dimensionless), threshold and
+    width (input unit), the map's deviation on 9 points (input unit) and the output offset at the input's
+    centre (output unit)."""
     ui, uo = units
     a0, a1, d, g, w = (float(v) for v in fit.theta[:5])
     c, s = ctx.u_c, ctx.u_s
@@ -709,13 +661,9 @@ def describe_knee(ctx: FitContext, fit: EffectFit, units: tuple[str, str], effec
     g0 = ctx.linear_of(effects or {}).dc_gain
     return {"variant": fit.variant, "coefficients": {"z^0": a0, "z^1": a1}, "threshold": d, "threshold_unit": ui,
             "slope_change": g, "width": w, "width_unit": ui,
-            "form": ("x_h + s*(a_0 + a_1 z) + g*(w*sp((x_h - d)/w) - w*sp((-x_h - d)/w)), z = (x_h - c)/s, "
-                     "sp(a) = log(1 + exp(a)), x_h the hysteresis output: a line whose slope changes by g beyond "
-                     "|x_h| = d (the map acts after the hysteresis, before the dynamics)"
-                     if fit.variant == AFTER_HYST_KNEE else
-                     "x + s*(a_0 + a_1 z) + g*(w*sp((x - d)/w) - w*sp((-x - d)/w)), z = (x - c)/s, "
-                     "sp(a) = log(1 + exp(a)): a line whose slope changes by g beyond |x| = d, the corner rounded "
-                     "over about w (the map acts on the input, before the dynamics)"),
+            "form": "x_h + s*(a_0 + a_1 z) + g*(w*sp((x_h - d)/w) - w*sp((-x_h - d)/w)), z = (x_h - c)/s, "
+                    "sp(a) = log(1 + exp(a)), x_h the hysteresis output: a line whose slope changes by g beyond "
+                    "|x_h| = d (the map acts after the hysteresis, before the dynamics)",
             "normalisation": {"centre": c, "half_range": s, "unit": ui},
             "curve": {"at": xs.tolist(), "deviation": (knee_map(fit.theta, xs, c, s) - xs).tolist()},
             "output_offset_at_centre": float(g0 * (knee_map(fit.theta, np.array([c]), c, s)[0] - c)),
