@@ -125,11 +125,8 @@ def cosine_chirp(rate_hz: float = 500.0, dur_s: float = 20.0) -> np.ndarray:
 
 
 def zoh_stroke(v: np.ndarray, rate_hz: float = 500.0) -> np.ndarray:
-    """``v`` (kV) through P(s), scipy's zero-order hold at ``rate_hz``, from rest at ``v[0]`` (mm)."""
-    num, den = paper.plant_tf()
-    b, a, _ = signal.cont2discrete((num, den), 1.0 / rate_hz, method="zoh")
-    b = np.ravel(b)
-    return signal.lfilter(b, a, v, zi=signal.lfilter_zi(b, a) * v[0])[0]
+    """``v`` (kV) through P(s), zero-order hold at ``rate_hz``, from rest at ``v[0]`` (mm): :func:`_simulate`."""
+    return _simulate(np.asarray(v, float), rate_hz)
 
 
 def diagnose_noisy(u: np.ndarray, z: np.ndarray, seed: int, rate_hz: float = 500.0, noise_mm: float = 0.005):
