@@ -155,6 +155,15 @@ class Pipeline:
         # the measured output piling up on its extreme (a clip): that value is a candidate limit
         self.clips = {end: v for end, (v, _) in flat_extremes(self.prep.records[0].y).items()}
 
+    def retime(self, offset: float) -> None:
+        """Take the output at ``offset`` working samples into each interval from now on
+        (:attr:`Prepared.sample_offset`): the nominal simulation is rebuilt and every cached linear
+        simulation and stage output dropped."""
+        self.prep.sample_offset = float(offset)
+        self.nominal = self.prep.sim(self.num, self.den)
+        self._lin.clear()
+        self._cache.clear()
+
     @property
     def span_s(self) -> float:
         """Length of the data log, s."""
