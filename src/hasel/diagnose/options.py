@@ -314,6 +314,13 @@ class Verdict:
         One per named effect with a parameter at a limit of its form (each effect's ``at_bound``
         lists them): ``name``, ``at_bound``, ``values``, ``note`` (the form may not fit; which
         experiment would tell).
+    timing_offset : dict
+        The output's sampling point against the zero-order-hold convention, a nuisance, not
+        physics: ``original_samples`` and ``seconds`` (positive: the output lags), the set-up's
+        ``fitted_beside`` nuisance load; when an output lag of under one sample fitted beside the
+        named effects was found to be this offset (the set-up's estimate biased by an effect), it is
+        re-estimated there and ``lag_taken_as_timing`` (that lag's parameters, s) and
+        ``set_up_original_samples`` (the first estimate) say so.
     """
 
     effects: list[dict]

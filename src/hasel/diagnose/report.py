@@ -34,9 +34,15 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     if warn:
         lines.insert(0, f"warning: {warn}")
     tm = getattr(v, "timing_offset", {}) or {}
-    if tm.get("original_samples"):
+    lag = tm.get("lag_taken_as_timing") or {}
+    if tm.get("original_samples") or lag:
         lines.append(f"timing offset (a sampling convention, not physics): the output lags the zero-order-hold "
-                     f"convention by {tm['original_samples']:+.2f} samples ({1e3 * tm['seconds']:+.3g} ms)")
+                     f"convention by {tm['original_samples'] + 0.0:+.2f} samples ({1e3 * tm['seconds'] + 0.0:+.3g} ms)")
+    if lag:
+        # the set-up's estimate was biased by an effect; say which lag the re-estimate replaced
+        lines.append(f"  re-estimated beside the named effects (set-up: {tm['set_up_original_samples']:+.2f} samples); "
+                     f"an output lag of {1e3 * lag['tau_rising_s']:.3g} / {1e3 * lag['tau_falling_s']:.3g} ms "
+                     f"(rising / falling), under one sample, is this offset and is not named")
     test = getattr(v, "test", {}) or {}
     over = h["nrmse_nominal"] / floor if floor > 0 else float("inf")
     if not v.effects:
