@@ -1,4 +1,4 @@
-"""A clip of the drive, and the timing offset the set-up estimates beside it (a known defect, recorded).
+"""A clip of the drive, and the timing offset the set-up estimates beside it (biased by the clip, re-estimated).
 
 A 0-7 kV raised-cosine chirp clipped at 5.5 kV (500 Hz, 20 s, white noise 0.005 mm; the exact P(s) simulated with
 scipy's zero-order hold, no hasel effect class) is named ``saturation`` at 5.5 kV. The set-up estimates the output's

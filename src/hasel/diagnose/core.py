@@ -61,7 +61,8 @@ from hasel.diagnose.options import DiagnoseOptions, DiagnosisFailed, Verdict
 from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import prepare
-from hasel.diagnose.setup_stages import _model_stage, _noise_stage, _nominal_model
+from hasel.diagnose.setup_stages import (AT_BOUND_NOTE, _model_stage, _noise_stage, _nominal_model, at_shift_bound,
+                                         grid_then_bounded, shift_range)
 from hasel.diagnose.significance import _alike, block_test, coloured_z
 from hasel.diagnose.wording import _evidence
 from hasel.effects.drift import LEVEL_CARRIERS
@@ -624,20 +625,14 @@ def _shift_search(ctx: _Context, eff: dict[str, EffectFit]) -> tuple[float, floa
     zero-order-hold convention) that fits the training samples of ``eff`` best, and that training MSE. Leaves
     ``ctx.pipe`` retimed to the last trial: the caller sets the one it keeps."""
     q = ctx.prep.decimation
-    a0 = (q - 1) / (2.0 * q)
-    lo, hi = max(-1.0, a0 - 1.0 / q), min(1.0, a0 + 1.0 / q)
+    _, lo, hi = shift_range(q)
 
     def cost(a: float) -> float:
         ctx.pipe.retime(a)
         return ctx.scores(eff)[0]
 
-    grid = np.linspace(lo, hi, 9)
-    costs = [cost(float(a)) for a in grid]
-    i = int(np.argmin(costs))
-    res = optimize.minimize_scalar(cost, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]),
-                                   method="bounded", options={"xatol": 0.002 / q})
-    a, mse = (float(res.x), float(res.fun)) if res.fun < costs[i] else (float(grid[i]), costs[i])
-    if min(a - lo, hi - a) < 0.02 / q:
+    a, mse = grid_then_bounded(cost, np.linspace(lo, hi, 9), 0.002 / q)
+    if at_shift_bound(a, lo, hi, q):
         return float("nan"), float("inf")  # at the range's bound: a lag, not a sampling convention
     return a, mse
 
@@ -656,7 +651,7 @@ def _lag_as_timing(ctx: _Context, st: _State, timing: dict) -> None:
     fs_orig = ctx.prep.info.get("original_rate_hz", ctx.prep.rate_hz)
     if (ctx.identified or fit is None or fit.variant.startswith("rate_limit") or len(fit.theta) < 2
             or max(fit.theta[0], fit.theta[1]) * fs_orig >= 1.0
-            or timing.get("note", "").startswith("the best shift reached")):
+            or timing.get("note") == AT_BOUND_NOTE):
         return
     a_cur = ctx.prep.sample_offset
     mse_with = ctx.scores(st.current)[0]
@@ -673,7 +668,7 @@ def _lag_as_timing(ctx: _Context, st: _State, timing: dict) -> None:
         return
     ctx.pipe.retime(a)
     q = ctx.prep.decimation
-    a0 = (q - 1) / (2.0 * q)
+    a0 = shift_range(q)[0]
     lag = -(a - a0) * q
     timing.update({"seconds": lag / fs_orig, "original_samples": lag, "lag_taken_as_timing": describe_params(
         ctx.pipe, fit, ("", ""), effects=st.current), "set_up_original_samples": -(a_cur - a0) * q})

@@ -331,11 +331,16 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
         th, uh, yh = (_block_mean(x, q) for x in hold_log)
         records.append(Record(th, uh, yh, np.zeros(th.size, bool), np.ones(th.size, bool)))
         split = "separate held-out log"
-    # block means of q instantaneous samples of a zero-order-hold log: the output sits (q - 1) / 2
-    # original samples into the interval over which the block's mean input is held
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
                     info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
-                    sample_offset=(q - 1) / (2.0 * q))
+                    sample_offset=zoh_offset(q))
+
+
+def zoh_offset(q: int) -> float:
+    """The output sampling point (working samples into each interval) of the zero-order-hold convention for block
+    means of ``q`` original samples: the block's output sits ``(q - 1) / 2`` original samples into the interval over
+    which its mean input is held."""
+    return (q - 1) / (2.0 * q)
 
 
 #: Exact fractional-offset discretisations already built: ``(sos, zi, d)`` by model, rate and offset.

@@ -19,7 +19,7 @@ from scipy import optimize
 from hasel.diagnose.augment import Pipeline
 from hasel.diagnose.nominal import scale_check
 from hasel.diagnose.options import DiagnoseOptions, DiagnosisFailed
-from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust
+from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, zoh_offset
 from hasel.diagnose.where import analyse
 from hasel.effects.load import LOAD_SAG_MIN_MU, loaded_den
 from hasel.errors import BadInputError
@@ -143,6 +143,36 @@ def _identify(prep: Prepared, opts: DiagnoseOptions, say) -> tuple[np.ndarray, n
     return num, den, src
 
 
+#: The ``timing_offset`` note of a shift search that reached its bound (the convention kept).
+AT_BOUND_NOTE = ("the best shift reached one original sample: not a sampling convention but a lag; the "
+                 "zero-order-hold convention is kept and any delay is left to the time_delay effect")
+
+
+def shift_range(q: int) -> tuple[float, float, float]:
+    """The zero-order-hold sampling point for block means of ``q`` samples (:func:`zoh_offset`) and the range the
+    timing offset is searched over: one original sample either side, within one working sample (working samples)."""
+    a0 = zoh_offset(q)
+    return a0, max(-1.0, a0 - 1.0 / q), min(1.0, a0 + 1.0 / q)
+
+
+def at_shift_bound(a: float, lo: float, hi: float, q: int) -> bool:
+    """Whether the shift ``a`` (working samples) found in ``[lo, hi]`` sits at a bound (within 2 % of an original
+    sample): a lag, not a sampling convention."""
+    return min(a - lo, hi - a) < 0.02 / q
+
+
+def grid_then_bounded(cost, grid: np.ndarray, xatol: float) -> tuple[float, float]:
+    """The minimiser of the scalar ``cost`` over ``grid``'s range and its cost: the best grid point, then a bounded
+    search between its neighbours, kept only when it beats that point (none when no grid point is finite)."""
+    costs = [cost(float(x)) for x in grid]
+    i = int(np.argmin(costs))
+    if not np.isfinite(costs[i]):
+        return float(grid[i]), float("inf")
+    res = optimize.minimize_scalar(cost, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]),
+                                   method="bounded", options={"xatol": xatol})
+    return (float(res.x), float(res.fun)) if res.fun < costs[i] else (float(grid[i]), float(costs[i]))
+
+
 def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float, say,
                  exclude: np.ndarray | None = None, nuisance_load: bool = True) -> dict:
     """Estimate the output sampling point as a nuisance (a timing offset) and set it in ``prep``.
@@ -171,8 +201,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     from hasel.diagnose.prep import estimate_timing
 
     q = prep.decimation
-    a0 = prep.sample_offset
-    lo, hi = max(-1.0, a0 - 1.0 / q), min(1.0, a0 + 1.0 / q)
+    a0, lo, hi = shift_range(q)
     r0 = prep.records[0]
     u = np.interp(r0.t_s - delay_s, r0.t_s, r0.u, left=r0.u[0]) if delay_s > 0 else r0.u
     use = r0.train & ~exclude if exclude is not None else r0.train  # clipped samples bound the output only
@@ -180,7 +209,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     ys = prep.sim(num, loaded_den(den, mu), 0.0).run_start(u).scaled(kappa)
     a, sse = estimate_timing(ys, r0.y, use, lo, hi)
     _, sse0 = estimate_timing(ys, r0.y, use, a0, a0)
-    at_bound = min(a - lo, hi - a) < 0.02 / q
+    at_bound = at_shift_bound(a, lo, hi, q)
     used = a0 if at_bound else a
     prep.sample_offset = used
     lag_samples = -(used - a0) * q
@@ -191,8 +220,7 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
            "note": ("a timing offset between the input and output samples (a sampling convention or clock "
                     "offset), estimated as a nuisance within one original sample; not a delay of the system")}
     if at_bound:
-        out["note"] = ("the best shift reached one original sample: not a sampling convention but a lag; the "
-                       "zero-order-hold convention is kept and any delay is left to the time_delay effect")
+        out["note"] = AT_BOUND_NOTE
         out["seconds"] = out["original_samples"] = 0.0
     out["fitted_beside"] = {"load_mass_ratio": mu, "gain_factor": kappa,
                             "note": "a nuisance load fitted with the shift so that a changed resonance's phase is "
@@ -229,14 +257,9 @@ def _load_nuisance(prep: Prepared, num: np.ndarray, den: np.ndarray, u: np.ndarr
         return sse, k
 
     grid = np.array([-0.5, -0.3, -0.15, 0.0, 0.15, 0.3, 0.5, 0.8, 1.2, 2.0])
-    costs = [cost(m)[0] for m in grid]
-    i = int(np.argmin(costs))
-    if not np.isfinite(costs[i]):
+    mu, best = grid_then_bounded(lambda m: cost(m)[0], grid, 0.005)
+    if not np.isfinite(best):
         return 0.0, 1.0
-    lo_m, hi_m = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-    res = optimize.minimize_scalar(lambda m: cost(m)[0], bounds=(lo_m, hi_m), method="bounded",
-                                   options={"xatol": 0.005})
-    mu = float(res.x) if res.fun < costs[i] else float(grid[i])
     sse, kappa = cost(mu)
     sse0 = estimate_timing(prep.sim(num, den, 0.0).run_start(u), y, use, lo, hi)[1]
     n = int(use.sum())
