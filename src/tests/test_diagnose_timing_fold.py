@@ -41,7 +41,8 @@ def test_a_delay_that_carries_the_total_beyond_one_sample_is_named(setup):
     nuisance, timing, said = _run(setup, delay)
     assert nuisance == set()
     assert timing["original_samples"] == setup and "delay_fit_within_one_sample_s" not in timing
-    assert said == []
+    assert len(said) == 1 and "beyond a timing offset's bound (1): named" in said[0]
+    assert f"reaches {setup + delay * RATE:.2f} samples" in said[0]
 
 
 def test_an_output_lead_at_set_up_leaves_room_for_the_delay():

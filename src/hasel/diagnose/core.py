@@ -625,6 +625,11 @@ def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:
         timing["seconds"] = float(timing["seconds"] + sub.theta[0])
         timing["original_samples"] = float(timing["original_samples"] + sub.theta[0] * fs_orig)
         ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample: a timing offset, not named")
+    elif sub is not None and sub.theta and sub.theta[0] * fs_orig < 1.0:
+        ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample, but beside the set-up's timing "
+                f"offset ({float(timing.get('original_samples', 0.0)):+.2f} samples) the lag reaches "
+                f"{float(timing.get('original_samples', 0.0)) + sub.theta[0] * fs_orig:.2f} samples, beyond a timing "
+                f"offset's bound ({bound:g}): named")
     return {"time_delay"} if "delay_fit_within_one_sample_s" in timing else set()
 
 
