@@ -394,27 +394,6 @@ def where_lost(name: str, rounds: list[dict], names: list[str]) -> str:
     return "not_proposed"
 
 
-def _failed_gates(r: dict, opts) -> list[str]:
-    """The acceptance gates a rejected forward round failed (its recorded figures against ``opts``)."""
-    out = []
-    if r.get("gain") is None or r.get("gap_share") is None:
-        return out
-    far = r.get("over_floor", 0) >= opts.relevant_over_floor and r["round"] > 1
-    need = opts.min_first_gain if r["round"] == 1 else opts.min_next_gain
-    if r["gain"] < need:
-        out.append(f"gain {r['gain']:.3f}")
-    if r["gap_share"] < (need if far else opts.min_gap_share):
-        out.append(f"gap_share {r['gap_share']:.3f}")
-    if not (r.get("t_block", 0) >= opts.t_min or r.get("z_coloured", 0) >= opts.zc_min):
-        out.append(f"held_out t {r.get('t_block', 0):.1f} z {r.get('z_coloured', 0):.1f}")
-    if r.get("delta_bic", -1) >= 0:
-        out.append("dBIC")
-    if not out:
-        out.append(f"big_enough (nominal share {r.get('nominal_gap_share', 0):.4f}, over floor "
-                   f"{r.get('over_floor', 0):.1f})")
-    return out
-
-
 _ORACLE: dict = {}
 
 
@@ -486,9 +465,8 @@ def run(cases: list[dict], out: str, say=print, oracle: bool = False) -> list[di
             v = diagnose(d["t_s"], d["voltage_kv"], d["stroke_mm"],
                          model={"num": d["num"].tolist(), "den": d["den"].tolist()}, units=("kV", "mm"), options=opts)
             rounds = v.rounds
-            for r in rounds:
-                if not r.get("accepted") and not r.get("backward_check"):
-                    r["failed"] = _failed_gates(r, opts)
+            for r in rounds:  # the gates the diagnosis recorded as failed (hasel.diagnose.core.failed_gates), by key
+                r["failed"] = [g["gate"] for g in r.get("failed", [])]
             r = {"names": v.names, "nominal": v.heldout["nrmse_nominal"], "augmented": v.heldout["nrmse_augmented"],
                  "floor": v.noise_floor_nrmse,
                  "rounds": [{k: x.get(k) for k in ("round", "best", "gain", "gap_share", "nominal_gap_share",

@@ -26,17 +26,26 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import free_indep  # noqa: E402
 
 
+def _verdict(t, u, y):
+    return diagnose(t, u, y, model={"num": free_indep.NUM.tolist(), "den": free_indep.DEN.tolist()},
+                    units=("kV", "mm"))
+
+
 def _names(t, u, y) -> list[str]:
-    v = diagnose(t, u, y, model={"num": free_indep.NUM.tolist(), "den": free_indep.DEN.tolist()},
-                 units=("kV", "mm"))
-    return v.names
+    return _verdict(t, u, y).names
 
 
 @pytest.mark.parametrize("index", [25, 11])
 def test_level_confounded_warm_up_is_not_a_map(index):
     a, desc = free_indep.make_one(11, index)
     assert desc["form"] == "mix_quant_wander" and "warm-up" in desc["truth"]
-    assert _names(a["t_s"], a["voltage_kv"], a["stroke_mm"]) == []
+    v = _verdict(a["t_s"], a["voltage_kv"], a["stroke_mm"])
+    assert v.names == []
+    # the verdict records why the map was refused: its gain is in the slow part only (the warm-up)
+    last = [r for r in v.rounds if "candidates" in r][-1]
+    assert last["best"] in ("static_nonlinearity", "sensor_nonlinearity") and not last["accepted"]
+    assert [g["gate"] for g in last["failed"]] == ["slow_only"]
+    assert last["slow_only"] and last["t_block_fast"] < 1.0 and f"{last['t_block_fast']:.1f}" in last["failed"][0]["why"]
 
 
 def test_real_input_map_beside_warm_up_is_named():

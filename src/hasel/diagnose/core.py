@@ -516,18 +516,57 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     far = rnd > 0 and over_floor >= opts.relevant_over_floor
     ok = (gain >= need and gap_share >= (need if far else opts.min_gap_share) and big_enough and held_out_ok
           and dbic < 0)
+    failed = [] if ok else failed_gates(opts, gain=gain, need=need, gap_share=gap_share,
+                                        gap_need=need if far else opts.min_gap_share, big_enough=big_enough,
+                                        nominal_share=nominal_share, over_floor=over_floor, first=rnd == 0,
+                                        t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic)
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
                           "over_floor": over_floor, "t_block_fast": t_fast, "slow_only": bool(slow_only),
                           "accepted": bool(ok)}
-                         | ({"magnitude_evidence": magnitude} if magnitude is not None else {}))
+                         | ({"magnitude_evidence": magnitude} if magnitude is not None else {})
+                         | ({"failed": failed} if failed else {}))
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g}"
             + (f", fast-part block score {t_fast:.1f} (a map needs {opts.map_fast_t_min:g}: slow co-variation only)"
                if slow_only else "") + f" -> {'accepted' if ok else 'rejected'}")
     return ok, gain
+
+
+def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: float, gap_need: float,
+                 big_enough: bool, nominal_share: float, over_floor: float, first: bool, t_blk: float, z_col: float,
+                 slow_only: bool, t_fast: float, dbic: float) -> list[dict]:
+    """The acceptance gates a round's best candidate failed (:func:`_acceptance`), each as ``gate`` (a key:
+    ``gain``, ``gap_share``, ``nominal_share``, ``held_out``, ``slow_only``, ``bic``) and ``why`` (one line in
+    words, with the figures and what each gate needs). Shares are fractions of the validation residual energy;
+    ``over_floor`` is that energy over the noise floor's."""
+    out = []
+    if gain < need:
+        out.append({"gate": "gain", "why": f"it removes {100 * gain:.1f} % of the validation error "
+                                           f"(needs {100 * need:.0f} %)"})
+    if gap_share < gap_need:
+        out.append({"gate": "gap_share", "why": f"it removes {100 * gap_share:.0f} % of the error above the noise "
+                                                f"floor (needs {100 * gap_need:.0f} %)"})
+    if not big_enough:
+        out.append({"gate": "nominal_share", "why": (
+            f"it is {100 * nominal_share:.2g} % of the nominal model's gap (needs {100 * opts.min_nominal_share:.0f} %"
+            + ("" if first else f", or what is left {opts.relevant_over_floor:g} x the floor's energy: here "
+                                f"{over_floor:.3g} x") + "): a remainder this small beside the named effects is "
+            "as often their forms' misfit as another effect")})
+    if slow_only:
+        out.append({"gate": "slow_only", "why": (
+            f"a map whose gain is in the slow part of the residual only (fast-part block score {t_fast:.1f}, a map "
+            f"needs {opts.map_fast_t_min:g}): a slow sensor offset wander or a drift gives that too; levels "
+            "visited in another order, or a rest at zero between them, separate a map from a wander")})
+    elif not (t_blk >= opts.t_min or z_col >= opts.zc_min):
+        out.append({"gate": "held_out", "why": (
+            f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
+            f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
+    if dbic >= 0:
+        out.append({"gate": "bic", "why": "the training BIC does not prefer its extra parameters"})
+    return out
 
 
 def _adopt_candidate(ctx: _Context, st: _State, results: list[Candidate], best: Candidate, gain: float) -> None:

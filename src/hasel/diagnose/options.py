@@ -307,7 +307,11 @@ class Verdict:
     model : dict
         The nominal model used: ``num``, ``den``, ``source``.
     rounds : list of dict
-        Every candidate's validation NRMSE per selection round.
+        Every candidate's validation NRMSE per selection round, the round's best (``best``) with the figures
+        its acceptance test read (``gain``, ``gap_share``, ``nominal_gap_share``, ``t_block``, ``z_coloured``,
+        ``delta_bic``, ``over_floor``, ``t_block_fast``, ``slow_only``), ``accepted`` and, when refused,
+        ``failed``: the gates it failed, each ``gate`` (a key) and ``why`` (words with the figures;
+        :func:`hasel.diagnose.core.failed_gates`); later records are the checks' (``backward_check``, ...).
     export : dict of ndarray
         ``t_s``, ``measured``, ``nominal``, ``augmented`` over the final held-out samples.
     notes : list of dict

@@ -21,7 +21,7 @@ import numpy as np
 
 from hasel.errors import BadInputError
 
-__all__ = ["write_report", "verdict_lines"]
+__all__ = ["write_report", "verdict_lines", "closest_unnamed", "LEFT_OVER_FLOOR"]
 
 
 def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
@@ -37,10 +37,10 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     lag = tm.get("lag_taken_as_timing") or {}
     if tm.get("original_samples") or lag:
         lines.append(f"timing offset (a sampling convention, not physics): the output lags the zero-order-hold "
-                     f"convention by {tm['original_samples'] + 0.0:+.2f} samples ({1e3 * tm['seconds'] + 0.0:+.3g} ms)")
+                     f"convention by {_signed(tm['original_samples'], 2)} samples ({1e3 * tm['seconds'] + 0.0:+.3g} ms)")
     if lag:
         # the set-up's estimate was biased by an effect; say which lag the re-estimate replaced
-        lines.append(f"  re-estimated beside the named effects (set-up: {tm['set_up_original_samples']:+.2f} samples); "
+        lines.append(f"  re-estimated beside the named effects (set-up: {_signed(tm['set_up_original_samples'], 2)} samples); "
                      f"an output lag of {1e3 * lag['tau_rising_s']:.3g} / {1e3 * lag['tau_falling_s']:.3g} ms "
                      f"(rising / falling), under one sample, is this offset and is not named")
     test = getattr(v, "test", {}) or {}
@@ -52,9 +52,16 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
             lines.append("no effect named: the nominal model explains the held-out data down to the noise floor")
         else:
             lines.append(f"no effect named: the nominal model is {over:.3g} x the noise floor, but no augmentation "
-                         f"passed the held-out test")
+                         f"passed the acceptance tests")
     for i, e in enumerate(v.effects, 1):
         lines.append(f"{i}. {e['name']} (NRMSE after {e['nrmse_after']:.4f}): {e['evidence']}")
+    left = h["nrmse_augmented"] / floor if floor > 0 else float("inf")
+    closest = closest_unnamed(getattr(v, "rounds", []) or [])
+    if closest is not None and test.get("max_effects") != 0 and left > LEFT_OVER_FLOOR:
+        # a gap well above the floor is left: say which explanation came closest and which test it failed
+        lines.append(f"left unexplained: {left:.3g} x the noise floor; closest unnamed: {closest['name']} (round "
+                     f"{closest['round']}, removes {_share(closest['gain'])} of the validation error), not named: "
+                     + "; ".join(closest["why"]))
     for nt in getattr(v, "notes", []) or []:
         lines.append(f"form may not fit: {nt['note']}")
     for d in getattr(v, "dropped", []) or []:
@@ -67,6 +74,33 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     if test.get("false_alarm_rate"):
         lines.append(f"test: {test['false_alarm_rate']}")
     return lines
+
+
+#: Held-out NRMSE over the noise floor's NRMSE above which the text summary says what came closest to explaining
+#: the rest (below it the remainder is within what the floor's estimate itself may be off by).
+LEFT_OVER_FLOOR = 2.0
+
+
+def closest_unnamed(rounds: list[dict]) -> dict | None:
+    """The best candidate of the last forward round that failed acceptance, from a verdict's ``rounds``: ``name``
+    (the newcomer's family or families beside what the round started from), ``round``, ``gain`` (share of the
+    validation residual energy it removed) and ``why`` (the failed gates in words); None when no forward round
+    failed (selection stopped at the floor or at ``max_effects``)."""
+    forward = [r for r in rounds if "candidates" in r and "accepted" in r]
+    for i in range(len(forward) - 1, -1, -1):
+        r = forward[i]
+        if r["accepted"] or not r.get("failed"):
+            continue
+        before = next((set(p["best"].split(" + ")) for p in reversed(forward[:i]) if p["accepted"]), set())
+        new = [n for n in str(r["best"]).split(" + ") if n not in before]
+        return {"name": " + ".join(new) or str(r["best"]), "round": int(r["round"]), "gain": float(r["gain"]),
+                "why": [g["why"] for g in r["failed"]]}
+    return None
+
+
+def _signed(x: float, digits: int) -> str:
+    """``x`` with its sign and ``digits`` decimals, ``+0.00`` for anything that rounds to zero (never ``-0.00``)."""
+    return f"{round(float(x), digits) + 0.0:+.{digits}f}"
 
 
 def _share(x: float) -> str:

@@ -1,0 +1,96 @@
+"""A verdict says which explanation came closest to a gap it leaves, and which acceptance gate refused it.
+
+``failed_gates`` turns a round's recorded figures into the gates it failed (words and numbers);
+``closest_unnamed`` reads the last refused forward round out of a verdict's ``rounds``; the text summary
+(``verdict_lines``) prints it when the held-out error left is more than ``LEFT_OVER_FLOOR`` times the floor.
+The end-to-end case is a tuning log (``bench/tune_diag/drifts.py`` seed 1, case 2: a fast input-side charge
+trap on a 2 kHz multisine with coloured noise) that main diagnoses as nothing at 275 x the floor: a map takes the
+offset the trap leaves, but only in the slow part, so it is refused.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+
+from hasel.diagnose import DiagnoseOptions, diagnose
+from hasel.diagnose.core import failed_gates
+from hasel.diagnose.report import LEFT_OVER_FLOOR, closest_unnamed, verdict_lines
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench", "tune_diag"))
+
+OPTS = DiagnoseOptions()
+PASS = dict(gain=0.5, need=0.12, gap_share=0.6, gap_need=0.2, big_enough=True, nominal_share=0.5, over_floor=40.0,
+            first=False, t_blk=5.0, z_col=8.0, slow_only=False, t_fast=3.0, dbic=-100.0)
+
+
+def _gates(**kw) -> list[str]:
+    return [g["gate"] for g in failed_gates(OPTS, **(PASS | kw))]
+
+
+def test_each_gate_is_reported_with_its_figures():
+    assert _gates() == []
+    assert _gates(gain=0.05) == ["gain"]
+    assert _gates(gap_share=0.1) == ["gap_share"]
+    assert _gates(big_enough=False, nominal_share=0.0008, over_floor=5.0) == ["nominal_share"]
+    assert _gates(t_blk=2.8, z_col=2.0) == ["held_out"]
+    assert _gates(t_blk=2.8, z_col=14.4) == []           # either held-out figure passes
+    assert _gates(t_blk=7.0, z_col=-0.5, slow_only=True, t_fast=-0.2) == ["slow_only"]
+    assert _gates(dbic=10.0) == ["bic"]
+    why = failed_gates(OPTS, **(PASS | dict(big_enough=False, nominal_share=0.0008, over_floor=4.96)))[0]["why"]
+    assert "0.08 % of the nominal model's gap (needs 3 %" in why and "here 4.96 x" in why
+    why = failed_gates(OPTS, **(PASS | dict(t_blk=2.76, z_col=1.3)))[0]["why"]
+    assert "block score 2.8, needs 3.9" in why and "z 1.3, needs 3.5" in why
+
+
+def _round(n, best, accepted, failed=None, gain=0.3):
+    r = {"round": n, "candidates": [{"name": best}], "best": best, "gain": gain, "accepted": accepted}
+    return r | ({"failed": [{"gate": "held_out", "why": w} for w in failed]} if failed else {})
+
+
+def test_closest_unnamed_is_the_newcomer_of_the_last_refused_round():
+    rounds = [_round(1, "static_nonlinearity", True, gain=0.99),
+              _round(2, "static_nonlinearity + load_mass", False, ["not confirmed"], gain=0.27),
+              {"round": 3, "backward_check": True, "best": "static_nonlinearity", "accepted": True}]
+    c = closest_unnamed(rounds)
+    assert c == {"name": "load_mass", "round": 2, "gain": 0.27, "why": ["not confirmed"]}
+    assert closest_unnamed(rounds[:1]) is None           # no refused round: stopped at the floor or max_effects
+    assert closest_unnamed([_round(1, "hysteresis", False, ["x"])])["name"] == "hysteresis"
+
+
+def _verdict(nominal, augmented, floor, effects, rounds):
+    return SimpleNamespace(heldout={"nrmse_nominal": nominal, "nrmse_augmented": augmented,
+                                    "gap_shrink": 1.0 - (augmented / nominal) ** 2},
+                           noise_floor_nrmse=floor, model={}, timing_offset={}, effects=effects, notes=[],
+                           dropped=[], ambiguous=[], test={}, rounds=rounds)
+
+
+def test_the_summary_names_the_closest_unnamed_only_when_a_gap_is_left():
+    rounds = [_round(1, "static_nonlinearity", True, gain=0.99),
+              _round(2, "static_nonlinearity + load_mass", False, ["the held-out test does not confirm it"])]
+    eff = [{"name": "static_nonlinearity", "nrmse_after": 0.0185, "evidence": "a map"}]
+    lines = verdict_lines(_verdict(0.38, 0.0185, 0.0083, eff, rounds))
+    left = [ln for ln in lines if ln.startswith("left unexplained")]
+    assert left == ["left unexplained: 2.23 x the noise floor; closest unnamed: load_mass (round 2, removes 30 % of "
+                    "the validation error), not named: the held-out test does not confirm it"]
+    near = 0.9 * LEFT_OVER_FLOOR * 0.0083
+    assert not any(ln.startswith("left unexplained") for ln in verdict_lines(_verdict(0.38, near, 0.0083, eff, rounds)))
+
+
+def test_a_refused_map_on_a_fast_charge_trap_is_reported_with_its_gate(tmp_path):
+    import drifts
+
+    case = drifts.make_case(str(tmp_path), 1, 2)
+    assert case is not None and case["labels"] == ["charge_drift"] and case["kind"].startswith("fast1:multisine")
+    d = np.load(case["path"])
+    v = diagnose(d["t_s"], d["voltage_kv"], d["stroke_mm"], model={"num": d["num"].tolist(), "den": d["den"].tolist()},
+                 units=("kV", "mm"))
+    assert v.names == []
+    left = v.heldout["nrmse_augmented"] / v.noise_floor_nrmse
+    assert left > 100.0                                  # the gap is far above the floor: not a near-floor case
+    c = closest_unnamed(v.rounds)
+    assert c is not None and c["name"] in ("sensor_nonlinearity", "static_nonlinearity") and c["gain"] > 0.9
+    line = next(ln for ln in verdict_lines(v) if ln.startswith("left unexplained"))
+    assert f"{left:.3g} x the noise floor" in line and "slow part of the residual only" in line
