@@ -17,7 +17,7 @@ import numpy as np
 
 from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.diagnose.core import failed_gates
-from hasel.diagnose.report import LEFT_OVER_FLOOR, closest_unnamed, verdict_lines
+from hasel.diagnose.report import LEFT_OVER_FLOOR, _share, closest_unnamed, verdict_lines
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench", "tune_diag"))
 
@@ -98,3 +98,8 @@ def test_a_refused_small_load_beside_a_map_is_reported_with_its_gate(tmp_path):
     assert c is not None and c["name"] == "load_mass" and c["round"] == 2 and 0.2 < c["gain"] < 0.35
     line = next(ln for ln in verdict_lines(v) if ln.startswith("left unexplained"))
     assert f"{left:.3g} x the noise floor" in line and "of the nominal model's gap (needs 3 %" in line
+
+
+def test_a_share_that_leaves_something_never_reads_100_percent():
+    assert _share(0.9975) == "99.7 %" and _share(0.99999) == "99.9 %" and _share(1.0) == "100 %"
+    assert _share(0.994) == "99 %" and _share(0.3) == "30 %" and _share(0.001) == "less than 0.5 %"

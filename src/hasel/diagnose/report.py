@@ -14,6 +14,7 @@ Figures:
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -111,6 +112,9 @@ def _share(x: float) -> str:
     x = float(x)
     if abs(x) < 0.005:
         return "less than 0.5 %" if x >= 0 else "a negative share"
+    if 0.995 <= x < 1.0:
+        # never "100 %" for a share that leaves something: one decimal, rounded down
+        return f"{math.floor(1000 * x) / 10:.1f} %"
     return f"{100 * x:.0f} %"
 
 
