@@ -514,12 +514,12 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # far above the floor the share of what is above it and the share of the whole residual are one figure:
     # a later effect there needs the later rounds' share (min_next_gain), not the floor-side min_gap_share
     far = rnd > 0 and over_floor >= opts.relevant_over_floor
-    ok = (gain >= need and gap_share >= (need if far else opts.min_gap_share) and big_enough and held_out_ok
-          and dbic < 0)
-    failed = [] if ok else failed_gates(opts, gain=gain, need=need, gap_share=gap_share,
-                                        gap_need=need if far else opts.min_gap_share, big_enough=big_enough,
-                                        nominal_share=nominal_share, over_floor=over_floor, first=rnd == 0,
-                                        t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic)
+    # the acceptance is the absence of a failed gate: one place decides it and says why
+    failed = failed_gates(opts, gain=gain, need=need, gap_share=gap_share,
+                          gap_need=need if far else opts.min_gap_share, big_enough=big_enough,
+                          nominal_share=nominal_share, over_floor=over_floor, first=rnd == 0,
+                          t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic)
+    ok = not failed
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
@@ -538,15 +538,16 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
 def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: float, gap_need: float,
                  big_enough: bool, nominal_share: float, over_floor: float, first: bool, t_blk: float, z_col: float,
                  slow_only: bool, t_fast: float, dbic: float) -> list[dict]:
-    """The acceptance gates a round's best candidate failed (:func:`_acceptance`), each as ``gate`` (a key:
+    """The acceptance gates a round's best candidate failed (:func:`_acceptance`: accepted when there is none), each as ``gate`` (a key:
     ``gain``, ``gap_share``, ``nominal_share``, ``held_out``, ``slow_only``, ``bic``) and ``why`` (one line in
     words, with the figures and what each gate needs). Shares are fractions of the validation residual energy;
     ``over_floor`` is that energy over the noise floor's."""
     out = []
-    if gain < need:
+    # each gate is the negation of its pass condition, so a NaN figure fails it
+    if not gain >= need:
         out.append({"gate": "gain", "why": f"it removes {100 * gain:.1f} % of the validation error "
                                            f"(needs {100 * need:.0f} %)"})
-    if gap_share < gap_need:
+    if not gap_share >= gap_need:
         out.append({"gate": "gap_share", "why": f"it removes {100 * gap_share:.0f} % of the error above the noise "
                                                 f"floor (needs {100 * gap_need:.0f} %)"})
     if not big_enough:
@@ -564,7 +565,7 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
         out.append({"gate": "held_out", "why": (
             f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
             f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
-    if dbic >= 0:
+    if not dbic < 0:
         out.append({"gate": "bic", "why": "the training BIC does not prefer its extra parameters"})
     return out
 
@@ -657,19 +658,21 @@ def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:
     prep = ctx.prep
     fs_orig = prep.info.get("original_rate_hz", prep.rate_hz)
     sub = st.current.get("time_delay")
+    if sub is None or not sub.theta or sub.theta[0] * fs_orig >= 1.0:
+        return set()
     bound = float(timing.get("bound_original_samples", 1.0))
-    if (sub is not None and sub.theta and sub.theta[0] * fs_orig < 1.0
-            and float(timing.get("original_samples", 0.0)) + sub.theta[0] * fs_orig < bound):
-        timing["delay_fit_within_one_sample_s"] = float(sub.theta[0])
-        timing["seconds"] = float(timing["seconds"] + sub.theta[0])
-        timing["original_samples"] = float(timing["original_samples"] + sub.theta[0] * fs_orig)
-        ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample: a timing offset, not named")
-    elif sub is not None and sub.theta and sub.theta[0] * fs_orig < 1.0:
+    set_up = float(timing.get("original_samples", 0.0))
+    total = set_up + sub.theta[0] * fs_orig
+    if not total < bound:  # (a NaN total is not folded either)
         ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample, but beside the set-up's timing "
-                f"offset ({float(timing.get('original_samples', 0.0)):+.2f} samples) the lag reaches "
-                f"{float(timing.get('original_samples', 0.0)) + sub.theta[0] * fs_orig:.2f} samples, beyond a timing "
-                f"offset's bound ({bound:g}): named")
-    return {"time_delay"} if "delay_fit_within_one_sample_s" in timing else set()
+                f"offset ({set_up:+.2f} samples) the lag reaches {total:.2f} samples, beyond a timing offset's bound "
+                f"({bound:g}): named")
+        return set()
+    timing["delay_fit_within_one_sample_s"] = float(sub.theta[0])
+    timing["seconds"] = float(timing["seconds"] + sub.theta[0])
+    timing["original_samples"] = float(total)
+    ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample: a timing offset, not named")
+    return {"time_delay"}
 
 
 def _shift_search(ctx: _Context, eff: dict[str, EffectFit]) -> tuple[float, float]:
