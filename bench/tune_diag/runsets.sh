@@ -3,9 +3,9 @@
 # core (taskset), niced, one process; OUTDIR/times.txt gets a line per set (wall seconds). PY overrides the python.
 # Compare two trees by running both side by side, one core each, then: python bench/tune_diag/tally.py OUT_A OUT_B
 # SETS default: all. Names: cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2
-# deadzones drifts modes datasets
+# deadzones drifts modes forms3 datasets
 TREE=$1; OUT=$2; CORE=${3:-1}; shift $(( $# < 3 ? $# : 3 ))
-SETS=${@:-cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes datasets}
+SETS=${@:-cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes forms3 datasets}
 PY=${PY:-$(cd "$(dirname "$0")/../.." && pwd)/.venv/bin/python}
 export PYTHONPATH=$TREE/src:$TREE/bench OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1
 mkdir -p $OUT
@@ -25,6 +25,7 @@ for s in $SETS; do
     deadzones) a="$TREE/bench/tune_diag/deadzones.py --seed 1";;
     drifts) a="$TREE/bench/tune_diag/drifts.py --seed 1";;
     modes) a="$TREE/bench/tune_diag/modes.py --seed 1";;
+    forms3) a="$TREE/bench/tune_diag/forms3.py --seed 1";;
     datasets) (cd $TREE && nice -n 5 taskset -c $CORE $PY bench/tune_diag/datasets.py > $OUT/datasets.log 2>&1); echo "datasets rc=$? $(( $(date +%s) - t0 )) s" >> $OUT/times.txt; continue;;
   esac
   mkdir -p $OUT/$s

@@ -3,7 +3,8 @@ usage: [TALLY_SETS="a b"] python bench/tune_diag/tally.py OUTDIR [OUTDIR2 ...] (
 import json, os, sys
 
 SETS = (os.environ.get("TALLY_SETS") or  # other set names (the held-back sets' folders, say); names free* are effect-free
-        "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes").split()
+        "cases loads combos other_pairs maps free_noise free_quiet free_indep11 free_indep13 multi2 deadzones drifts modes "
+        "forms3").split()
 
 def as_set(x):
     """Effect names of a truth or verdict field (list, comma string, dict or 'none') as a set."""

@@ -46,6 +46,7 @@ def test_a_closed_loop_log_with_sensor_wander_names_nothing(tmp_path):
     v = _diagnose_file(c.path)
     assert v.names == []
     assert v.noise["trust"].startswith("low")  # the wander makes the spectral floor a lower bound
+    assert any("slow part" in n for n in v.noise["trust_notes"])  # the same reason, as a list for readers
 
 
 def test_a_held_out_block_test_ignores_coloured_noise_but_not_a_real_change():

@@ -76,7 +76,7 @@ def test_the_summary_names_the_closest_unnamed_only_when_a_gap_is_left():
     assert left == ["left unexplained: 2.23 x the noise floor; closest unnamed: load_mass (round 2, removes 30 % of "
                     "the validation error), not named: the held-out test does not confirm it"]
     low = _verdict(0.38, 0.0185, 0.0083, eff, rounds)
-    low.noise = {"trust": "low: the noise is coloured"}
+    low.noise = {"trust": "low: the noise is coloured", "trust_notes": ["the noise is coloured"]}
     assert any(ln.startswith("left unexplained: 2.23 x the noise floor (a lower bound of the noise here, the noise is "
                              "coloured); closest unnamed: load_mass") for ln in verdict_lines(low))
     near = 0.9 * LEFT_OVER_FLOOR * 0.0083

@@ -706,7 +706,8 @@ def noise_trust(r: np.ndarray, rate_hz: float, f_excited_hz: float, sigma2: floa
     the level above it under-states the noise in it), and the slow part of the residual
     (a moving average over a second: a sensor offset wander or a drift, which no spectral
     level above the band sees). Either makes the floor a lower bound; effects are then
-    accepted only on the held-out block test, which does not use the floor.
+    accepted only on the held-out block test, which does not use the floor. ``trust`` says
+    so in words ("low: ..." or "good: ..."), ``trust_notes`` lists the reasons (empty when good).
     """
     r = signal.detrend(np.asarray(r, float))
     out = {"estimator": {"spectral": "median residual spectrum above 3x the excited band (white noise assumed)",
@@ -734,4 +735,6 @@ def noise_trust(r: np.ndarray, rate_hz: float, f_excited_hz: float, sigma2: floa
                          "or a drift): the floor leaves it out")
     out["trust"] = "low: " + "; ".join(notes) if notes else "good: the residual above the band is white and has no " \
                                                             "slow excess"
+    # the reasons also as a list: a reader (the report) takes them from here, not by cutting the text above
+    out["trust_notes"] = notes
     return out

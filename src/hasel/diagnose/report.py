@@ -60,10 +60,9 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     closest = closest_unnamed(getattr(v, "rounds", []) or [])
     if closest is not None and test.get("max_effects") != 0 and left > LEFT_OVER_FLOOR:
         # a gap well above the floor is left: say which explanation came closest and which test it failed
-        trust = str((getattr(v, "noise", {}) or {}).get("trust", ""))
+        low = list((getattr(v, "noise", {}) or {}).get("trust_notes", []) or [])
         lines.append(f"left unexplained: {left:.3g} x the noise floor"
-                     + (" (a lower bound of the noise here, " + trust[len("low: "):] + ")" if trust.startswith("low")
-                        else "")
+                     + (" (a lower bound of the noise here, " + "; ".join(low) + ")" if low else "")
                      + f"; closest unnamed: {closest['name']} (round {closest['round']}, removes "
                        f"{_share(closest['gain'])} of the validation error), not named: " + "; ".join(closest["why"]))
     for nt in getattr(v, "notes", []) or []:
