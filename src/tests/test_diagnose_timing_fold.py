@@ -18,11 +18,13 @@ from hasel.effects.base import EffectFit
 RATE = 500.0  # Hz: one original sample is 2 ms
 
 
-def _run(setup_samples: float, delay_s: float):
+def _run(setup_samples: float, delay_s: float, bound_reached: str | None = None):
     said: list[str] = []
     ctx = SimpleNamespace(prep=SimpleNamespace(info={"original_rate_hz": RATE}, rate_hz=RATE), say=said.append)
     st = SimpleNamespace(current={"time_delay": EffectFit("time_delay", "input", (delay_s,))})
     timing = {"seconds": setup_samples / RATE, "original_samples": setup_samples, "bound_original_samples": 1.0}
+    if bound_reached is not None:  # the set-up's search reached that end and kept the convention (0)
+        timing["bound_reached"] = bound_reached
     return _timing_fold(ctx, st, timing), timing, said
 
 
@@ -50,3 +52,38 @@ def test_an_output_lead_at_set_up_leaves_room_for_the_delay():
     nuisance, timing, _ = _run(-0.6, 0.0018)
     assert nuisance == {"time_delay"}
     assert timing["original_samples"] == pytest.approx(0.3)
+
+
+def test_a_delay_is_not_folded_when_the_set_up_reached_its_lag_bound():
+    # the set-up saw more lag than a convention and left it to the delay (combos.py seed 21 #10: a 6.4 ms shift at
+    # 200 Hz, fitted 0.8 sample): folding it back would report a lag the set-up refused as timing
+    nuisance, timing, said = _run(0.0, 0.0016, bound_reached="lag")
+    assert nuisance == set()
+    assert timing["original_samples"] == 0.0 and "delay_fit_within_one_sample_s" not in timing
+    assert len(said) == 1 and "reached its lag bound" in said[0] and said[0].endswith("named")
+    # at the lead end the set-up saw the output ahead: a delay under a sample is still a timing offset
+    assert _run(0.0, 0.0016, bound_reached="lead")[0] == {"time_delay"}
+
+
+@pytest.mark.parametrize("lag_samples,reached", [(0, None), (2, "lag")])
+def test_the_set_up_says_which_end_of_its_search_it_reached(lag_samples, reached):
+    # a first-order-hold log is half a sample ahead of the zero-order hold: within the search, no bound; its output
+    # two samples late (1.5 samples of lag) reaches the lag end, and the convention is kept (offset 0)
+    import numpy as np
+
+    from hasel import paper
+    from hasel.diagnose.prep import prepare
+    from hasel.diagnose.setup_stages import timing_stage
+    from hasel_bench.othersim import FohSystem, excitation
+
+    rng = np.random.default_rng(4)
+    u, _ = excitation(rng, RATE, short=True)
+    num, den = paper.plant_tf()
+    z = FohSystem(num, den, 1.0 / RATE).run(u)
+    if lag_samples:
+        z = np.concatenate([np.full(lag_samples, z[0]), z[:-lag_samples]])
+    t = np.arange(u.size) / RATE
+    prep = prepare(t, u, z + 0.004 * rng.standard_normal(u.size), model_den=den)
+    out = timing_stage(prep, num, den, 0.0, lambda m: None)
+    assert out.get("bound_reached") == reached
+    assert out["original_samples"] == (0.0 if reached else pytest.approx(-0.5, abs=0.1))

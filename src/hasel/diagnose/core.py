@@ -654,11 +654,19 @@ def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:
     lag behind the zero-order hold): a delay that would carry the set-up's offset plus itself beyond it is
     more lag than any sampling convention or fractional clock offset gives, so it is named. (On a tuning log
     a 2.5 ms delay with a 2.4 ms lag at 500 Hz was split into a set-up offset of 0.86 sample and a fitted
-    delay of 0.86 sample, and the whole reported as a timing offset of 1.72 samples.)"""
+    delay of 0.86 sample, and the whole reported as a timing offset of 1.72 samples.) Nor is a delay folded when
+    the set-up's search reached its lag bound (``bound_reached``): the set-up kept the convention because the lag
+    was more than a timing offset, and left it to the delay; folding it back would undo that. (On a tuning log, a
+    6.4 ms delay beside a falling-speed limit at 200 Hz: the set-up reached the bound, the delay was fitted as
+    4.0 ms, 0.8 sample, and reported as a timing offset.)"""
     prep = ctx.prep
     fs_orig = prep.info.get("original_rate_hz", prep.rate_hz)
     sub = st.current.get("time_delay")
     if sub is None or not sub.theta or sub.theta[0] * fs_orig >= 1.0:
+        return set()
+    if timing.get("bound_reached") == "lag":
+        ctx.say(f"the fitted delay {1e3 * sub.theta[0]:.3g} ms is within one sample, but the set-up's timing search "
+                f"reached its lag bound (more lag than a timing offset): named")
         return set()
     bound = float(timing.get("bound_original_samples", 1.0))
     set_up = float(timing.get("original_samples", 0.0))

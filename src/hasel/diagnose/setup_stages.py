@@ -222,6 +222,8 @@ def timing_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: floa
     if at_bound:
         out["note"] = AT_BOUND_NOTE
         out["seconds"] = out["original_samples"] = 0.0
+        # which end: at the lag end the delay is the time_delay effect's (and is not folded back, _timing_fold)
+        out["bound_reached"] = "lag" if a < a0 else "lead"
     out["fitted_beside"] = {"load_mass_ratio": mu, "gain_factor": kappa,
                             "note": "a nuisance load fitted with the shift so that a changed resonance's phase is "
                                     "not read as timing; not part of the model"}
