@@ -183,5 +183,38 @@ def select(cases: list[dict], only: str, list_only: bool) -> list[dict]:
     return cases
 
 
+def generator_main(argv: list[str] | None, doc: str, make, seed: int, extra=None, serial: bool = False) -> int:
+    """The command line every single-seed generator shares: ``--out DIR [--seed S] [--only SUBSTR,...] [--list]``.
+
+    The cases (``make(out, seed)``, cached in ``out/cases_<seed>.json``) are diagnosed one after the other
+    (``serial``: the diagnosis's own pool set to one job as well) and summed up in ``out/results.json``
+    (:func:`cases.finish`); ``extra(cases, rows)``, when given, adds entries to that summary (and prints them)."""
+    p = argparse.ArgumentParser(description=doc.split("\n")[0])
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=seed)
+    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
+    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
+    a = p.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
+    if not cases:
+        return 0
+    if serial:
+        from hasel.diagnose.pool import set_jobs
+
+        set_jobs(1)
+    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
+    finish(cases, rows, a.out)
+    if extra is not None:
+        more = extra(cases, rows)
+        print(json.dumps(more))
+        with open(os.path.join(a.out, "results.json")) as fh:
+            res = json.load(fh)
+        res["summary"].update(more)
+        with open(os.path.join(a.out, "results.json"), "w") as fh:
+            json.dump(res, fh, indent=1, default=str)
+    return 0
+
+
 if __name__ == "__main__":
     sys.exit(main())

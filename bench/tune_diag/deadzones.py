@@ -35,8 +35,6 @@ case with the form).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import sys
 
@@ -46,8 +44,7 @@ from hasel_bench import othersim as o
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import multi2 as m2  # noqa: E402
-from cases import finish, run  # noqa: E402
-from combos import cached, select  # noqa: E402
+from combos import generator_main  # noqa: E402
 
 RATES = (200.0, 500.0, 1000.0, 2000.0, 5000.0)
 DESIGNS = ("chirp0", "steps0", "multisine0", "paper")
@@ -198,29 +195,7 @@ def dead_summary(cases: list[dict], rows: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/deadzones.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
-    if not cases:
-        return 0
-    from hasel.diagnose.pool import set_jobs
-
-    set_jobs(1)
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    finish(cases, rows, a.out)
-    extra = dead_summary(cases, rows)
-    print(json.dumps(extra))
-    with open(os.path.join(a.out, "results.json")) as fh:
-        res = json.load(fh)
-    res["summary"].update(extra)
-    with open(os.path.join(a.out, "results.json"), "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    return 0
+    return generator_main(argv, __doc__, make, 1, extra=dead_summary, serial=True)
 
 
 if __name__ == "__main__":

@@ -30,8 +30,6 @@ fitted drift time constants per case.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import sys
 
@@ -40,8 +38,7 @@ import numpy as np
 from hasel import paper
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cases import finish, run  # noqa: E402
-from combos import _command, cached, select  # noqa: E402
+from combos import _command, generator_main  # noqa: E402
 from multi2 import LSB_MM, _levels, _linear, _lowpass, _noise, _plant, draw  # noqa: E402
 from multi2 import chain as multi2_chain  # noqa: E402
 
@@ -154,36 +151,19 @@ def make(directory: str, seed: int = 1) -> list[dict]:
     return [c for c in (make_case(directory, seed, i) for i in range(len(KINDS))) if c is not None]
 
 
+def drift_summary(cases: list[dict], rows: list[dict]) -> dict:
+    """The drift cases named with a drift, T / S / false alarms over the set and each drift case's fitted drift."""
+    dr = [r for r in rows if "charge_drift" in r["labels"]]
+    return {"drift_named": f"{sum('charge_drift' in r['names'] for r in dr)}/{len(dr)}",
+            "T": sum(len(set(r["labels"]) & set(r["names"])) for r in rows),
+            "S": sum(len(set(r["names"]) - set(r["labels"])) for r in rows),
+            "FA": f"{sum(bool(r['names']) for r in rows if not r['labels'])}/{sum(not r['labels'] for r in rows)}",
+            "drift_fits": {r["kind"]: r.get("params", {}).get("charge_drift") for r in dr}}
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/drifts.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
-    if not cases:
-        return 0
-    from hasel.diagnose.pool import set_jobs
-
-    set_jobs(1)
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    s = finish(cases, rows, a.out)
-    dr = [r for r in rows if "charge_drift" in r["labels"]]
-    extra = {"drift_named": f"{sum('charge_drift' in r['names'] for r in dr)}/{len(dr)}",
-             "T": sum(len(set(r["labels"]) & set(r["names"])) for r in rows),
-             "S": sum(len(set(r["names"]) - set(r["labels"])) for r in rows),
-             "FA": f"{sum(bool(r['names']) for r in rows if not r['labels'])}/{sum(not r['labels'] for r in rows)}",
-             "drift_fits": {r["kind"]: r.get("params", {}).get("charge_drift") for r in dr}}
-    print(json.dumps(extra))
-    with open(os.path.join(a.out, "results.json")) as fh:
-        res = json.load(fh)
-    res["summary"].update(extra)
-    with open(os.path.join(a.out, "results.json"), "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    return 0
+    return generator_main(argv, __doc__, make, 1, extra=drift_summary, serial=True)
 
 
 if __name__ == "__main__":

@@ -124,7 +124,6 @@ writes them and prints the truth only; otherwise every case is diagnosed in one 
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -135,8 +134,7 @@ from scipy import linalg, signal
 from hasel import paper
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cases import finish, run  # noqa: E402
-from combos import cached, select  # noqa: E402
+from combos import generator_main  # noqa: E402
 
 #: P(s) (17) of the paper (kV -> mm): gain, notch (rad/s), the mechanical pairs' 2 zeta w (rad/s)
 K_P, W_P, C_P = 10.836, 122.2, 230.0
@@ -728,22 +726,7 @@ def make(directory: str, seed: int = 1) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/forms3.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
-    if not cases:
-        return 0
-    from hasel.diagnose.pool import set_jobs
-
-    set_jobs(1)
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    finish(cases, rows, a.out)
-    return 0
+    return generator_main(argv, __doc__, make, 1, serial=True)
 
 
 if __name__ == "__main__":

@@ -32,8 +32,6 @@ was named.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import sys
@@ -44,8 +42,8 @@ from hasel import paper
 from hasel_bench import othersim as o
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cases import _simulate, finish, run  # noqa: E402
-from combos import DESIGNS, MIN_VISIBLE, NOISES, _command, cached, select  # noqa: E402
+from cases import _simulate  # noqa: E402
+from combos import DESIGNS, MIN_VISIBLE, NOISES, _command, generator_main  # noqa: E402
 
 F = o.ForeignEffect
 RATES = (200.0, 500.0, 1000.0, 2000.0)
@@ -151,27 +149,9 @@ def load_recall(rows: list[dict], k: int) -> float | None:
 
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/loads.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=3)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
-    if not cases:
-        return 0
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    s = finish(cases, rows, a.out)
-    extra = {"load_recall_2": load_recall(rows, 2), "load_recall_3": load_recall(rows, 3),
-             "load_named_singles": load_recall(rows, 1)}
-    print(json.dumps(extra))
-    with open(os.path.join(a.out, "results.json")) as fh:
-        res = json.load(fh)
-    res["summary"].update(extra)
-    with open(os.path.join(a.out, "results.json"), "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    return 0
+    return generator_main(argv, __doc__, make, 3, extra=lambda cases, rows: {
+        "load_recall_2": load_recall(rows, 2), "load_recall_3": load_recall(rows, 3),
+        "load_named_singles": load_recall(rows, 1)})
 
 
 if __name__ == "__main__":

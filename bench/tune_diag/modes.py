@@ -21,8 +21,6 @@ the ``model:mode`` form) and ``mode_hz_error`` (per such case: the fitted over t
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import sys
@@ -33,8 +31,8 @@ from hasel import paper
 from hasel_bench import othersim as o
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from cases import _simulate, finish, run  # noqa: E402
-from combos import DESIGNS, MIN_VISIBLE, NOISES, _command, cached, select  # noqa: E402
+from cases import _simulate  # noqa: E402
+from combos import DESIGNS, MIN_VISIBLE, NOISES, _command, generator_main  # noqa: E402
 from loads import creep  # noqa: E402
 
 F = o.ForeignEffect
@@ -124,26 +122,7 @@ def mode_summary(cases: list[dict], rows: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/modes.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
-    if not cases:
-        return 0
-    rows = run(cases, lambda m: (print(m), sys.stdout.flush()))
-    s = finish(cases, rows, a.out)
-    extra = mode_summary(cases, rows)
-    print(json.dumps(extra))
-    with open(os.path.join(a.out, "results.json")) as fh:
-        res = json.load(fh)
-    res["summary"].update(extra)
-    with open(os.path.join(a.out, "results.json"), "w") as fh:
-        json.dump(res, fh, indent=1, default=str)
-    return 0
+    return generator_main(argv, __doc__, make, 1, extra=mode_summary)
 
 
 if __name__ == "__main__":
