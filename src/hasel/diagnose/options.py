@@ -324,7 +324,13 @@ class Verdict:
         ``fitted_beside`` nuisance load; when an output lag of under one sample fitted beside the
         named effects was found to be this offset (the set-up's estimate biased by an effect), it is
         re-estimated there and ``lag_taken_as_timing`` (that lag's parameters, s) and
-        ``set_up_original_samples`` (the first estimate) say so.
+        ``set_up_original_samples`` (the first estimate) say so. ``bound_reached`` ("lag" or
+        "lead", only then) when the set-up's search ended at one original sample: the convention
+        is kept (offset 0) and, at the lag end, a delay under one sample is named, not folded here.
+    noise : dict
+        The noise floor's estimator, ``rms`` (output unit), ``repeats_used``, and how far to trust
+        it: ``trust`` in words ("good: ..." or "low: ...") and ``trust_notes``, the reasons a
+        list (empty when good: coloured noise, a slow part such as a sensor wander).
     """
 
     effects: list[dict]
