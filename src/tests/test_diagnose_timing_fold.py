@@ -10,10 +10,15 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
+from hasel import paper
 from hasel.diagnose.core import _timing_fold
+from hasel.diagnose.prep import prepare
+from hasel.diagnose.setup_stages import timing_stage
 from hasel.effects.base import EffectFit
+from hasel_bench.othersim import FohSystem, excitation
 
 RATE = 500.0  # Hz: one original sample is 2 ms
 
@@ -69,13 +74,6 @@ def test_a_delay_is_not_folded_when_the_set_up_reached_its_lag_bound():
 def test_the_set_up_says_which_end_of_its_search_it_reached(lag_samples, reached):
     # a first-order-hold log is half a sample ahead of the zero-order hold: within the search, no bound; its output
     # two samples late (1.5 samples of lag) reaches the lag end, and the convention is kept (offset 0)
-    import numpy as np
-
-    from hasel import paper
-    from hasel.diagnose.prep import prepare
-    from hasel.diagnose.setup_stages import timing_stage
-    from hasel_bench.othersim import FohSystem, excitation
-
     rng = np.random.default_rng(4)
     u, _ = excitation(rng, RATE, short=True)
     num, den = paper.plant_tf()
