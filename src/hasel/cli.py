@@ -43,7 +43,13 @@ _WORKSPACE_MODULES = frozenset({"rclpy", "hasel_ros", "hasel_msgs", "hasel_drive
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line and exit code 2 (no usage dump)."""
+    """argparse, but a usage error is one line and exit code 2 (no usage dump), and an option must be spelled
+    whole: argparse's prefix matching read ``identify --out X`` as ``--output X`` and then failed on a column
+    named X, far from the typo."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         name = self.prog.split()[-1]

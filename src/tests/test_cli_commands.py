@@ -55,3 +55,18 @@ def test_every_command_runs_with_one_blas_thread_unless_the_user_set_one(tmp_pat
                            env=env, timeout=60)
         assert want in p.stdout, (p.stdout, p.stderr)
         assert "no_such_log" in p.stderr  # the command did run (and refused the missing file)
+
+
+def test_an_option_prefix_is_not_taken_for_the_whole_option(tmp_path, capsys):
+    """``identify --out X`` is an unknown option (one line, exit 2), not ``--output X``: the prefix match had
+    the command run and fail on a missing column named X."""
+    log = tmp_path / "log.csv"
+    log.write_text("t,u,y\n0,0,0\n0.001,1,0.1\n")
+    try:
+        code = cli.main(["identify", str(log), "--out", "x.json"])
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "unrecognized arguments: --out x.json" in err
+    assert "column" not in err and len(err.strip().splitlines()) == 1
