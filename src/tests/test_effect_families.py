@@ -48,6 +48,7 @@ GENERIC = [
     EffectFit("asymmetric_dynamics", "rate_limit:falling", (20.0,)),
     EffectFit("charge_drift", "output", (0.4, 0.05, 0.02)),
     EffectFit("sensor_nonlinearity", "output", (0.01, 0.02, -0.04)),
+    EffectFit("saturation", "output:slew", (15.0,)),
 ]
 
 
@@ -83,7 +84,7 @@ def test_generic_form_in_5ms_chunks_equals_one_call(fit):
 
 def test_chunked_stages_without_arithmetic_state_are_bit_for_bit():
     x = _signal()
-    for fit in (GENERIC[1], GENERIC[5], GENERIC[8], GENERIC[10], GENERIC[12]):
+    for fit in (GENERIC[1], GENERIC[5], GENERIC[8], GENERIC[10], GENERIC[12], GENERIC[-1]):
         fam = FAMILIES[fit.name]
         assert np.array_equal(run_chunked(fam.stage(fit, _SCALES, DT), x, CHUNK),
                               fam.simulate(fit, x, _SCALES, DT)), fit
@@ -192,6 +193,7 @@ RECOVER = [
     (EffectFit("asymmetric_dynamics", "output", (0.0, 0.06, 0.0)), 0.05),
     (EffectFit("asymmetric_dynamics", "rate_limit:falling", (8.0,)), 0.02),
     (EffectFit("saturation", "slew", (30.0,)), 0.02),
+    (EffectFit("saturation", "output:slew", (12.0,)), 0.02),
 ]
 
 

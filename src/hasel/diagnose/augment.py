@@ -12,7 +12,8 @@ saturation          input or output         clip at a lower or an upper limit; o
                                             piles up on its extremes (a sensor's
                                             or a physical limit seen in the data);
                                             or (``slew``, input) a slew-rate limit:
-                                            the input moves at most ``S`` per second
+                                            the input moves at most ``S`` per second;
+                                            (``output:slew``) the output likewise
 static_nonlinearity input or internal       input map ``x + s sum_j a_j z^j`` (degree 5),
                     (or after_hysteresis)   (``after_hysteresis``: the same map of the
                                             hysteresis output, offered only beside an
@@ -86,7 +87,7 @@ from hasel.effects.load import LOAD_SAG_MIN_MU, damping_factor, keeps_zeta, load
 from hasel.effects.operators import play
 from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
-from hasel.effects.saturation import measured_clip, slew_limit
+from hasel.effects.saturation import OUTPUT_SLEW, measured_clip, slew_limit
 from hasel.effects.static_map import NEAR_LINEAR_SHARE, linear_static  # noqa: F401
 from hasel.effects.static_map import AFTER_HYST, apply_input
 from hasel.effects.static_map import max_degree as _max_degree
@@ -300,7 +301,9 @@ class Pipeline:
             y = y * (1.0 + f.theta[1] * q) + self.y_s * f.theta[2] * q
         out["y_drift"] = y
         f = e.get("saturation")
-        if f is not None and f.variant.startswith("output"):
+        if f is not None and f.variant == OUTPUT_SLEW:
+            y = slew_limit(y, f.theta[0], self.prep.dt_s)
+        elif f is not None and f.variant.startswith("output"):
             y = _clip(y, f)
         out["y_sat"] = y
         f = e.get("sensor_nonlinearity")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.effects.load import load_offset
-from hasel.effects.saturation import stop_limit
+from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 
 __all__: list[str] = []
 
@@ -22,11 +22,14 @@ def _rate_unit(unit: str) -> str:
     return f" {unit}/s" if unit else " per second"
 
 
-def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "") -> str:
+def _saturation_text(fit: EffectFit, lv: dict, input_unit: str = "", output_unit: str = "") -> str:
     if fit.variant == "slew":
         return (f"the residual appears where the input moves fast (steps, the fast part of a sweep), whatever "
                 f"the level, and its lag grows with amplitude times frequency: the input cannot move faster "
                 f"than {fit.theta[0]:.4g}{_rate_unit(input_unit)} (a slew-rate limit)")
+    if fit.variant == OUTPUT_SLEW:
+        return (f"the residual appears where the output moves fast, either way, whatever the level: the stroke "
+                f"cannot move faster than {fit.theta[0]:.4g}{_rate_unit(output_unit)} (a speed limit of the output)")
     side, end = fit.variant.split(":")
     if side == "measured":
         clipped = lv.get("clipped_output", {})
@@ -64,7 +67,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
         "sensor_nonlinearity": lambda: (f"the residual is a function of the output level (instantaneous output bins "
                                 f"explain {_pct(lv['share_instant_output'])}) applied after the dynamics: "
                                 f"an output-side map fits better than an input-side one"),
-        "saturation": lambda: _saturation_text(fit, lv, units[0]),
+        "saturation": lambda: _saturation_text(fit, lv, units[0], units[1]),
         "time_delay": lambda: (f"the residual tracks the nominal output's rate (correlation "
                        f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
                        f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),

@@ -8,7 +8,9 @@ Forms
 - generic ``input:upper|lower`` / ``output:upper|lower`` (``theta = (limit,)``): a clip of
   the input or of the output; ``measured:upper|lower|both`` (``(limit,)`` or
   ``(lower, upper)``): the measured range where the output piles up, applied last;
-  ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`);
+  ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`); ``output:slew``
+  (``(S,)``): the stroke moves at most ``S`` per second either way (the liquid cannot flow faster through the
+  zipping front; the same stage on the output);
   ``output:stop_upper|stop_lower`` (``(knee, room, gain, offset)``): a smooth end stop of the
   stroke (:func:`stop_map`): up to ``knee`` a line, beyond it the output approaches
   ``knee + room`` (``knee - room`` for the lower end) on that line.
@@ -31,8 +33,16 @@ from hasel.effects.operators import rate_limited, rate_step
 from hasel.errors import BadInputError
 from hasel.validate import positive
 
-__all__ = ["Saturation", "ClipStage", "SlewStage", "SoftLimitStage", "clip", "slew_limit", "measured_clip",
+__all__ = ["OUTPUT_SLEW", "Saturation", "ClipStage", "SlewStage", "SoftLimitStage", "clip", "slew_limit", "measured_clip",
            "pile_up", "end_stop", "stop_map", "is_stop", "stop_limit", "STOP_KNEE_MIN_QUANTILE", "SaturationFamily", "FAMILY"]
+
+
+#: Variant of a speed limit of the output (both directions; the asymmetric family's ``rate_limit`` is one way).
+OUTPUT_SLEW = "output:slew"
+
+
+def _is_slew(fit: EffectFit) -> bool:
+    return fit.variant in ("slew", OUTPUT_SLEW)
 
 
 def _choice(rng: np.random.Generator, options: tuple[str, ...]) -> str:
@@ -242,7 +252,7 @@ class SaturationFamily(EffectFamily):
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("slew_rate",)``, ``("lower", "upper")`` or ``("limit",)``."""
-        if fit.variant == "slew":
+        if _is_slew(fit):
             return ("slew_rate",)
         if is_stop(fit):
             return ("knee", "room", "gain", "offset")
@@ -251,8 +261,8 @@ class SaturationFamily(EffectFamily):
         return (fit.variant.split(":")[-1],)
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> ClipStage | SlewStage:
-        """A :class:`SlewStage` for ``slew``, else a :class:`ClipStage`."""
-        return SlewStage(fit.theta[0], dt_s) if fit.variant == "slew" else ClipStage(fit)
+        """A :class:`SlewStage` for ``slew`` and ``output:slew``, else a :class:`ClipStage`."""
+        return SlewStage(fit.theta[0], dt_s) if _is_slew(fit) else ClipStage(fit)
 
     def truth_stage(self, effect: Effect, dt_s: float) -> ClipStage | SoftLimitStage:
         """Amplifier: a clip of the command to ``+-limit_kv``; stroke: the smooth limit."""
@@ -262,12 +272,13 @@ class SaturationFamily(EffectFamily):
         return SoftLimitStage(effect)
 
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-        """Best of a clip at either end of the input or the output (grids on their quantiles) and a slew limit."""
+        """Best of a clip at either end of the input or the output (grids on their quantiles), a smooth end stop,
+        and a slew limit of the input or of the output."""
         return _fit_saturation(ctx, effects)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """A slew limit is positive; a clip's limits are free."""
-        if fit.variant == "slew":
+        if _is_slew(fit):
             return np.array([1e-12]), np.array([np.inf])
         if is_stop(fit):
             return np.array([-np.inf, 1e-12, 0.0, -np.inf]), np.array([np.inf, np.inf, np.inf, np.inf])
@@ -279,11 +290,14 @@ class SaturationFamily(EffectFamily):
         ui, uo = units
         th = fit.theta
         out: dict = {"variant": fit.variant}
-        if fit.variant == "slew":
-            out["acts_on"] = "input"
+        if _is_slew(fit):
+            side = "input" if fit.variant == "slew" else "output"
+            out["acts_on"] = side
             out["slew_rate_limit"] = th[0]
-            out["unit"] = f"{ui}/s" if ui else "input units/s"
-            out["form"] = "x_k = x_(k-1) + clip(u_k - x_(k-1), -S dt, S dt): the input moves at most S per second"
+            u = ui if side == "input" else uo
+            out["unit"] = f"{u}/s" if u else f"{side} units/s"
+            out["form"] = (f"x_k = x_(k-1) + clip(u_k - x_(k-1), -S dt, S dt): the {side} moves at most S per second"
+                           " (either way)")
             return out
         side, end = fit.variant.split(":")
         out["acts_on"] = "output" if side == "measured" else side
@@ -333,11 +347,13 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
         c = _sse(pipe, _with(effects, stop))
         if c < best_cost:
             best, best_cost = stop, c
-    # a slew-rate limit of the input: the gap only where the input moves faster than the limit
-    grid = rate_grid(st[0]["x_delay"], pipe.prep.dt_s)
-    rate, c = fit_log_scalar(lambda v: _sse(pipe, _with(effects, EffectFit("saturation", "slew", (v,)))), grid)
-    if c < best_cost:
-        best, best_cost = EffectFit("saturation", "slew", (rate,)), c
+    # a slew-rate limit of the input, or of the stroke: the gap only where the signal moves faster than the limit
+    for variant, sig in (("slew", st[0]["x_delay"]), (OUTPUT_SLEW, st[0]["y_drift"])):
+        grid = rate_grid(sig, pipe.prep.dt_s)
+        rate, c = fit_log_scalar(lambda v, variant=variant: _sse(pipe, _with(effects, EffectFit("saturation", variant,
+                                                                                                  (v,)))), grid)
+        if c < best_cost:
+            best, best_cost = EffectFit("saturation", variant, (rate,)), c
     return best
 
 
