@@ -346,8 +346,8 @@ def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
     # constant, no step at all near 1 s, so a start there stays put (test_drift_forms: a 2 s trap fitted 1.07 s
     # from the 1.06 s point on one machine, 2.04 s from the 2.12 s point on another)
     c1, x1 = c0, None
-    for _, start in ranked[:2]:
-        if start is not best and not math.isfinite(_):
+    for c_start, start in ranked[:2]:
+        if not math.isfinite(c_start):  # the best's cost is finite (checked above); a penalised second is no start
             continue
         res = optimize.minimize(cost, np.log(start.theta[:2]), method="Nelder-Mead",
                                 options={"maxfev": 20, "xatol": 0.05, "fatol": 1e-9 * max(c0, 1e-300)})
