@@ -183,20 +183,30 @@ def select(cases: list[dict], only: str, list_only: bool) -> list[dict]:
     return cases
 
 
+def generator_parser(doc: str, seed: int) -> argparse.ArgumentParser:
+    """The options every single-seed generator takes: ``--out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
+    p = argparse.ArgumentParser(description=doc.split("\n")[0])
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=seed)
+    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
+    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
+    return p
+
+
+def generator_cases(p: argparse.ArgumentParser, argv: list[str] | None, make) -> tuple[argparse.Namespace, list[dict]]:
+    """The parsed options and the selected cases (``make(out, seed)``, cached in ``out/cases_<seed>.json``)."""
+    a = p.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    return a, select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
+
+
 def generator_main(argv: list[str] | None, doc: str, make, seed: int, extra=None, serial: bool = False) -> int:
     """The command line every single-seed generator shares: ``--out DIR [--seed S] [--only SUBSTR,...] [--list]``.
 
     The cases (``make(out, seed)``, cached in ``out/cases_<seed>.json``) are diagnosed one after the other
     (``serial``: the diagnosis's own pool set to one job as well) and summed up in ``out/results.json``
     (:func:`cases.finish`); ``extra(cases, rows)``, when given, adds entries to that summary (and prints them)."""
-    p = argparse.ArgumentParser(description=doc.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=seed)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
+    a, cases = generator_cases(generator_parser(doc, seed), argv, make)
     if not cases:
         return 0
     if serial:

@@ -42,7 +42,6 @@ progress lines go to ``DIR/trace_NN.txt``; per lost member the stage where it wa
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -54,7 +53,7 @@ from scipy import signal
 from hasel import paper
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from combos import _command, cached, select  # noqa: E402
+from combos import _command, generator_cases, generator_parser  # noqa: E402
 
 RATES = (200.0, 500.0, 1000.0, 2000.0, 5000.0)
 DESIGNS = ("paper", "multisine", "prbs", "chirp", "cl_steps", "levels")
@@ -518,15 +517,9 @@ def summary(rows: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """``python bench/tune_diag/multi2.py --out DIR [--seed S] [--only SUBSTR,...] [--list]``."""
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True)
-    p.add_argument("--seed", type=int, default=21)
-    p.add_argument("--only", default="", help="comma-separated substrings of case kinds or file names")
-    p.add_argument("--list", action="store_true", help="write the cases and print their truth only")
+    p = generator_parser(__doc__, 21)
     p.add_argument("--oracle", action="store_true", help="also fit the true families (slower; the loss table)")
-    a = p.parse_args(argv)
-    os.makedirs(a.out, exist_ok=True)
-    cases = select(cached(os.path.join(a.out, f"cases_{a.seed}.json"), lambda: make(a.out, a.seed)), a.only, a.list)
+    a, cases = generator_cases(p, argv, make)
     if not cases:
         return 0
     rows = run(cases, a.out, lambda m: (print(m), sys.stdout.flush()), oracle=a.oracle)
