@@ -532,40 +532,9 @@ LEVEL_CARRIERS = ("static_nonlinearity", "sensor_nonlinearity")
 
 
 def _fit_drift(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    span = pipe.span_s
-    tau_min = _tau_min(pipe)
-    taus = span * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0])
-    taus = np.unique(np.clip(taus, tau_min, None))
-
-    # drift is slow: its weights are fitted on slow parts only, else its low-pass (a 90 degree
-    # lag at any fast frequency) could pose as the quadrature part of a hysteresis loop
-    n_min = min(r.u.size for r in pipe.prep.records)
-    smooth = int(min(max(10.0 * pipe.t_dom, 0.25 * tau_min) * pipe.prep.rate_hz, n_min / 4))
-
-    # beside a map the map's constant holds the output's level, and so the mean of a drift fitted after it: the
-    # residual the drift sees has zero mean, which a charge from zero cannot match (map_33 of maps.py seed 41: the
-    # slow-part fit without a constant left more than no drift, with one it removed 74 %). A constant is then fitted
-    # beside the weights and left out of the form: the map gives up the level when it is refitted (core._fit_one)
-    level = any(k in effects for k in LEVEL_CARRIERS)
-
-    def ls_at(tau: float) -> EffectFit:
-        def basis(ri, st):
-            q = pipe.charge(st["x_sat"], tau)
-            return [st["y_asym"] * q, pipe.y_s * q] + ([np.full_like(q, pipe.y_s)] if level else [])
-
-        base = {k: v for k, v in effects.items() if k != "charge_drift"}
-        g, o = _ls(pipe, base, basis, smooth=smooth)[:2]
-        return EffectFit("charge_drift", "output", (float(tau), float(g), float(o)))
-
-    best = min((ls_at(float(t)) for t in taus), key=lambda f: _sse(pipe, _with(effects, f)))
-    lt = math.log(best.theta[0])
-    res = optimize.minimize_scalar(lambda v: _sse(pipe, _with(effects, ls_at(math.exp(v)))),
-                                   bounds=(max(lt - 0.7, math.log(tau_min)), lt + 0.7), method="bounded",
-                                   options={"maxiter": 12})
-    cand = ls_at(math.exp(float(res.x)))
-    if _sse(pipe, _with(effects, cand)) < _sse(pipe, _with(effects, best)):
-        best = cand
-    return best  # no refinement on the full residual: that would undo the slow-only fit
+    """The one-tau form of the level (``output``): the charge the input's low-passed level (:meth:`charge`),
+    weights on slow parts for a grid of time constants, the best refined in ``log tau`` (:func:`_one_tau_refined`)."""
+    return _one_tau_refined(pipe, effects, lambda x, tau, ri: pipe.charge(x, tau), "output")[0]
 
 
 #: time constants of the time-only rival of :func:`_travel_vs_time`, a log grid from :func:`tau_min` to 10 x the log
@@ -574,12 +543,18 @@ TRAVEL_RIVAL_GRID = 12
 
 
 def _one_tau_fit(pipe: FitContext, effects: dict[str, EffectFit], charge_of, variant: str,
-                 taus: np.ndarray) -> tuple[EffectFit, float]:
-    """The one-tau law ``y (1 + g q) + y_s o q`` with the charge ``charge_of(x, tau)`` (``x`` the chain's input):
-    weights by least squares on slow parts (beside a constant where a map holds the level, as :func:`_fit_drift`)
-    for each of ``taus``; the best and its training SSE."""
+                 taus: np.ndarray) -> tuple[EffectFit | None, float]:
+    """The one-tau law ``y (1 + g q) + y_s o q`` with the charge ``charge_of(x, tau, record)`` (``x`` the chain's
+    input): weights by least squares on slow parts (beside a constant where a map holds the level) for each of
+    ``taus`` (s); the best (the first of equal costs) and its training SSE (output unit²)."""
+    # drift is slow: its weights are fitted on slow parts only, else its low-pass (a 90 degree
+    # lag at any fast frequency) could pose as the quadrature part of a hysteresis loop
     n_min = min(r.u.size for r in pipe.prep.records)
     smooth = int(min(max(10.0 * pipe.t_dom, 0.25 * _tau_min(pipe)) * pipe.prep.rate_hz, n_min / 4))
+    # beside a map the map's constant holds the output's level, and so the mean of a drift fitted after it: the
+    # residual the drift sees has zero mean, which a charge from zero cannot match (map_33 of maps.py seed 41: the
+    # slow-part fit without a constant left more than no drift, with one it removed 74 %). A constant is then fitted
+    # beside the weights and left out of the form: the map gives up the level when it is refitted (core._fit_one)
     level = any(k in effects for k in LEVEL_CARRIERS)
     base = {k: v for k, v in effects.items() if k != "charge_drift"}
     best, best_c = None, math.inf
@@ -610,25 +585,29 @@ def _time_sse(pipe: FitContext, base: dict[str, EffectFit], f: EffectFit, charge
     return tot
 
 
-def _fit_travel(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    """The ``output:travel`` form (a grid of time constants, the best refined in ``log tau``), or None when the
-    swing's history does not explain the residual better than time alone (:func:`_travel_vs_time`)."""
+def _one_tau_refined(pipe: FitContext, effects: dict[str, EffectFit], charge_of, variant: str
+                     ) -> tuple[EffectFit | None, float]:
+    """:func:`_one_tau_fit` on a grid of time constants (0.15-5 x the log, at least :func:`tau_min`), the best
+    refined in ``log tau`` within a factor of two (bounded, 12 evaluations) and kept where lower; the fit and its
+    training SSE (output unit²). No refinement on the full residual: that would undo the slow-only fit."""
     tmin = _tau_min(pipe)
     taus = np.unique(np.clip(pipe.span_s * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0]), tmin, None))
-
-    def swing(x, tau, ri):
-        return _travel_pipe(pipe, x, tau)
-
-    best, c0 = _one_tau_fit(pipe, effects, swing, TRAVEL, taus)
-    if best is None:
-        return None
+    best, c0 = _one_tau_fit(pipe, effects, charge_of, variant, taus)
+    if best is None:  # no finite cost on the grid
+        return None, math.inf
     lt = math.log(best.theta[0])
-    res = optimize.minimize_scalar(lambda v: _one_tau_fit(pipe, effects, swing, TRAVEL, np.array([math.exp(v)]))[1],
+    res = optimize.minimize_scalar(lambda v: _one_tau_fit(pipe, effects, charge_of, variant,
+                                                          np.array([math.exp(v)]))[1],
                                    bounds=(max(lt - 0.7, math.log(tmin)), lt + 0.7), method="bounded",
                                    options={"maxiter": 12})
-    cand, c1 = _one_tau_fit(pipe, effects, swing, TRAVEL, np.array([math.exp(float(res.x))]))
-    if c1 < c0:
-        best, c0 = cand, c1
+    cand, c1 = _one_tau_fit(pipe, effects, charge_of, variant, np.array([math.exp(float(res.x))]))
+    return (cand, c1) if c1 < c0 else (best, c0)
+
+
+def _fit_travel(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The ``output:travel`` form (:func:`_one_tau_refined` with the swing's charge), or None when the swing's
+    history does not explain the residual better than time alone (:func:`_travel_vs_time`)."""
+    best, c0 = _one_tau_refined(pipe, effects, lambda x, tau, ri: _travel_pipe(pipe, x, tau), TRAVEL)
     return best if c0 < _travel_vs_time(pipe, effects) else None
 
 
