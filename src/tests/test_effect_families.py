@@ -48,6 +48,7 @@ GENERIC = [
     EffectFit("asymmetric_dynamics", "rate_limit:falling", (20.0,)),
     EffectFit("charge_drift", "output", (0.4, 0.05, 0.02)),
     EffectFit("sensor_nonlinearity", "output", (0.01, 0.02, -0.04)),
+    EffectFit("charge_drift", "output:travel", (0.4, -0.02, 0.01)),
     EffectFit("saturation", "output:slew", (15.0,)),
 ]
 

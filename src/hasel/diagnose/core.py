@@ -65,7 +65,7 @@ from hasel.diagnose.setup_stages import (AT_BOUND_NOTE, _model_stage, _noise_sta
                                          grid_then_bounded, shift_range)
 from hasel.diagnose.significance import _alike, block_test, coloured_z
 from hasel.diagnose.wording import _evidence
-from hasel.effects.drift import LEVEL_CARRIERS
+from hasel.effects.drift import LEVEL_CARRIERS, TRAVEL, fit_level_forms
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.registry import family
 from hasel.effects.saturation import is_stop
@@ -157,6 +157,16 @@ def _fit_one(ctx: _Context, base: dict[str, EffectFit], name: str) -> Candidate 
         # it does not keep (hasel.effects.drift._fit_drift): the map is refitted given the drift (and the drift
         # given it), each refit kept only when the training error falls (_alternate)
         eff = _alternate(ctx, eff, carriers + [name])
+        if TRAVEL in (fit.variant, eff[name].variant):
+            # the swing's charge and a level's are nearly one regressor on a rising chirp: the family's first fit,
+            # before the map follows it, may take the swing where the level, alternated with the map, fits better
+            # (combos.py seed 21 #3; study h-travel). The level's alternation is the rival, the lower training
+            # error kept.
+            lvl = fit_level_forms(ctx.pipe, base)
+            if lvl is not None:
+                eff_l = _alternate(ctx, {**base, name: lvl}, carriers + [name], fitter=_level_fitter)
+                if ctx.scores(eff_l)[0] < ctx.scores(eff)[0]:
+                    eff = eff_l
         fit = eff[name]
     if name == "load_mass" and _raises(ctx, eff) and any(not _fixed(k, v) for k, v in base.items()):
         lowered = _lowered_load(ctx, base)
@@ -326,11 +336,17 @@ def _relinear(ctx: _Context, base: dict[str, EffectFit], name: str, fit: EffectF
     return min(tried, key=lambda e: ctx.scores(e)[0]) if tried else None
 
 
-def _alternate(ctx: _Context, eff: dict[str, EffectFit], names_: list[str]) -> dict[str, EffectFit]:
-    """Refit each of ``names_`` given the others (twice), keeping a refit only if training improves."""
+def _level_fitter(pipe, base: dict[str, EffectFit], name: str, init: EffectFit | None = None) -> EffectFit | None:
+    """:func:`fit_family` with the drift held to its level forms (:func:`hasel.effects.drift.fit_level_forms`)."""
+    return fit_level_forms(pipe, base) if name == "charge_drift" else fit_family(pipe, base, name, init=init)
+
+
+def _alternate(ctx: _Context, eff: dict[str, EffectFit], names_: list[str], fitter=fit_family) -> dict[str, EffectFit]:
+    """Refit each of ``names_`` given the others (twice, with ``fitter``, :func:`fit_family`'s signature), keeping a
+    refit only if training improves."""
     for _ in range(2):
         for nm in names_:
-            f2 = fit_family(ctx.pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm, init=eff.get(nm))
+            f2 = fitter(ctx.pipe, {k2: v for k2, v in eff.items() if k2 != nm}, nm, init=eff.get(nm))
             if f2 is not None:
                 trial = {**eff, nm: f2}
                 if ctx.scores(trial)[0] <= ctx.scores(eff)[0]:

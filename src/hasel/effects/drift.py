@@ -24,9 +24,17 @@ Forms
   charges carry a transient toward the input's mean that a sensor warm-up, a function of time only, can
   match; free_indep.py seed 11 case 25).
 
+- generic ``output:travel`` (``theta = (tau, g, o)``): charge injected by each swing of the voltage rather than
+  held by its level, ``y (1 + g q) + y_s o q`` with ``q`` the swing of the input (the sum of ``|dx|``) over the
+  last ``tau`` seconds, leaking with ``tau``, from none, over ``u_s`` (:func:`travel_charge`): a gain lost with
+  cycling, which recovers at rest. Fitted as ``output`` (weights on slow parts for a grid of time constants) and
+  taken in its place when its training error is lower and the swing's history explains the residual better than
+  time alone does (:func:`_travel_vs_time`: on a steady excitation the swing grows as ``1 - exp(-t / tau)``, a
+  function of time a warm-up also is).
+
 The truth and ``output`` run :class:`DriftStage` (a chain of first-order low-passes from zero,
 their states carried between chunks, and the law :func:`drift_law`); ``output:2tau`` runs
-:class:`Drift2Stage`. The stages need the input (voltage) beside the output: ``run(y, u)``.
+:class:`Drift2Stage`, ``output:travel`` :class:`TravelStage`. The stages need the input (voltage) beside the output: ``run(y, u)``.
 """
 from __future__ import annotations
 
@@ -42,7 +50,7 @@ from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scal
 from hasel.effects.fitkit import _ls, _sse, _with, bic_prefers, sumsq
 from hasel.validate import in_range, positive
 
-__all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
+__all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "TravelStage", "travel_charge", "TRAVEL", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
            "smoothing_s", "charges2", "pipe_output", "fit_drift_on_repeats", "DriftFamily", "FAMILY"]
 
 
@@ -199,6 +207,57 @@ class Drift2Stage:
         return x + self.offsets[0] * qf + self.offsets[1] * qs
 
 
+#: variant name of the swing-driven form
+TRAVEL = "output:travel"
+
+
+def travel_charge(x: np.ndarray, dt_s: float, tau_s: float, state: tuple[float, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, tuple[float, np.ndarray]]:
+    """The swing of ``x`` over the last ``tau_s`` seconds (units of ``x``): ``q_k = a q_(k-1) + |x_k - x_(k-1)|``,
+    ``a = exp(-dt_s / tau_s)``, from none (``state`` None: ``x[0]`` taken as the sample before).
+
+    ``state``: ``(last x, filter state)`` of the previous chunk; returns ``(q, state)`` for the next one."""
+    x = np.asarray(x, float)
+    if x.size == 0:
+        return x.copy(), state if state is not None else (0.0, np.zeros(1))
+    prev, zi = (float(x[0]), np.zeros(1)) if state is None else state
+    a = math.exp(-dt_s / tau_s)
+    q, zf = signal.lfilter([1.0], [1.0, -a], np.abs(np.diff(x, prepend=prev)), zi=zi)
+    return q, (float(x[-1]), zf)
+
+
+class TravelStage:
+    """The ``output:travel`` form chunk by chunk: the swing :func:`travel_charge` of the input over ``u_scale``
+    and :func:`drift_law` (``gain`` per input half-range of swing, ``offset`` in output units per one)."""
+
+    def __init__(self, dt_s: float, tau_s: float, u_scale: float, gain: float, offset: float) -> None:
+        self.dt_s, self.tau_s, self.u_scale = float(dt_s), float(tau_s), float(u_scale)
+        self.gain, self.offset = float(gain), float(offset)
+        self.state: tuple[float, np.ndarray] | None = None
+
+    def reset(self, x0: float) -> None:
+        """No swing stored."""
+        self.state = None
+
+    def run(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """Output ``x`` with the drift of the input ``u``'s swing (same samples; ``None``: ``x`` itself)."""
+        x = np.asarray(x, float)
+        q, self.state = travel_charge(x if u is None else np.asarray(u, float), self.dt_s, self.tau_s, self.state)
+        return drift_law(x, q / self.u_scale, self.gain, self.offset)
+
+
+def _travel_pipe(pipe, x: np.ndarray, tau_s: float) -> np.ndarray:
+    """The swing of a pipeline's input ``x`` over ``tau_s`` (s), over ``u_s`` (cached by the pipeline when it can)."""
+    def make():
+        return travel_charge(x, pipe.prep.dt_s, tau_s)[0] / pipe.u_s
+
+    memo = getattr(pipe, "_memo", None)
+    if memo is None:
+        return make()
+    key = ("travel", hashlib.blake2b(np.ascontiguousarray(x).tobytes(), digest_size=16).digest(), tau_s)
+    return memo(key, make)
+
+
 def tau_min(pipe) -> float:
     """Shortest drift time constant the diagnosis tries, s: 20 dominant time constants, 30 % of the
     log, at least 50 samples."""
@@ -245,6 +304,9 @@ def _charges2_pipe(pipe, x: np.ndarray, tf: float, tsl: float) -> tuple[np.ndarr
 def pipe_output(pipe, x: np.ndarray, y: np.ndarray, fit: EffectFit) -> np.ndarray:
     """Output ``y`` of the diagnosis's chain with the drift ``fit`` of a non-``output`` variant driven by
     the (delayed, clipped) input ``x``, whole record (used by ``Pipeline.stages``)."""
+    if fit.variant == TRAVEL:
+        q = _travel_pipe(pipe, x, fit.theta[0])
+        return y * (1.0 + fit.theta[1] * q) + pipe.y_s * fit.theta[2] * q
     tf, tsl, of, os_ = fit.theta
     qf, qs = _charges2_pipe(pipe, x, tf, tsl)
     return y + pipe.y_s * (of * qf + os_ * qs)
@@ -412,10 +474,18 @@ def _history_vs_time(pipe: FitContext, recs: list, taus: tuple[float, float], ta
     return form, rival
 
 
-def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    """The one-tau form, and the two-tau form in its place when its three more parameters lower the
-    training BIC (the family's selection habit, as the load's ``model:damp``)."""
+def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit], swing_ok: bool = True) -> EffectFit | None:
+    """The one-tau form (of the level, or of the swing where that fits better, :func:`_fit_travel`; the level only
+    when not ``swing_ok``), and the two-tau form in its place when its three more parameters lower the training BIC
+    (the family's selection habit, as the load's ``model:damp``)."""
     one = _fit_drift(pipe, effects)
+    try:
+        swing = _fit_travel(pipe, effects) if swing_ok else None
+    except (ValueError, np.linalg.LinAlgError):
+        swing = None
+    if swing is not None and (one is None or (_sse(pipe, _with(effects, swing)) < _sse(pipe, _with(effects, one))
+                                              and _held_out_prefers(pipe, _with(effects, one), _with(effects, swing)))):
+        one = swing
     try:
         two = _fit_drift2(pipe, effects)
     except (ValueError, np.linalg.LinAlgError):
@@ -428,46 +498,132 @@ def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectF
     return two if bic_prefers(n, s1, s2, len(two.theta) - (len(one.theta) if one is not None else 0)) else one
 
 
+def fit_level_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The family's fit without the swing form (the level's one- or two-tau law): the rival the diagnosis alternates
+    beside a map when the family's own choice was the swing (:func:`hasel.diagnose.core._fit_one`)."""
+    try:
+        return _fit_drift_forms(pipe, {k: v for k, v in effects.items() if k != "charge_drift"}, swing_ok=False)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+
+
+def _held_out_prefers(pipe: FitContext, old: dict[str, EffectFit], new: dict[str, EffectFit]) -> bool:
+    """True when ``new`` predicts the validation samples better than ``old`` by the diagnosis's held-out block test
+    (:func:`hasel.diagnose.significance.block_test`, slow part kept: a drift is slow) at its acceptance score
+    ``DiagnoseOptions.t_min``; True as well where the fit context has no validation samples (a plant's own fit).
+
+    Why: on a chirp whose frequency rises the swing grows through the log as a level drift's charge does, so the two
+    are nearly one regressor on training; there the swing took a level drift's place and the set then failed the
+    held-out test (combos.py seed 21 #3, multi2.py #6; study h-travel). The swing is taken only where the held-out
+    blocks say it is the better law (forms3.py seed 1 #23, a gain lost per cycle: 0.906 -> 0.025)."""
+    from hasel.diagnose.options import DiagnoseOptions  # the diagnosis's test and threshold (a lazy import:
+    from hasel.diagnose.significance import _block_labels, block_test  # diagnose imports the families)
+
+    prep = getattr(pipe, "prep", None)
+    if prep is None or not any(r.valid.any() for r in prep.records):
+        return True
+    labels = _block_labels(prep, "valid")
+    return block_test(pipe.residuals(old, "valid"), pipe.residuals(new, "valid"), labels) >= DiagnoseOptions().t_min
+
+
 #: families whose fit holds the output's level (a constant term): an input map's ``z^0`` through the model's gain, a
 #: sensor map's offset. Beside one of them the one-tau form's weights are fitted with a constant (:func:`_fit_drift`)
 LEVEL_CARRIERS = ("static_nonlinearity", "sensor_nonlinearity")
 
 
 def _fit_drift(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
-    span = pipe.span_s
-    tau_min = _tau_min(pipe)
-    taus = span * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0])
-    taus = np.unique(np.clip(taus, tau_min, None))
+    """The one-tau form of the level (``output``): the charge the input's low-passed level (:meth:`charge`),
+    weights on slow parts for a grid of time constants, the best refined in ``log tau`` (:func:`_one_tau_refined`)."""
+    return _one_tau_refined(pipe, effects, lambda x, tau, ri: pipe.charge(x, tau), "output")[0]
 
+
+#: time constants of the time-only rival of :func:`_travel_vs_time`, a log grid from :func:`tau_min` to 10 x the log
+#: (as :data:`TIME_RIVAL_GRID`, not tuned)
+TRAVEL_RIVAL_GRID = 12
+
+
+def _one_tau_fit(pipe: FitContext, effects: dict[str, EffectFit], charge_of, variant: str,
+                 taus: np.ndarray) -> tuple[EffectFit | None, float]:
+    """The one-tau law ``y (1 + g q) + y_s o q`` with the charge ``charge_of(x, tau, record)`` (``x`` the chain's
+    input): weights by least squares on slow parts (beside a constant where a map holds the level) for each of
+    ``taus`` (s); the best (the first of equal costs) and its training SSE (output unit²)."""
     # drift is slow: its weights are fitted on slow parts only, else its low-pass (a 90 degree
     # lag at any fast frequency) could pose as the quadrature part of a hysteresis loop
     n_min = min(r.u.size for r in pipe.prep.records)
-    smooth = int(min(max(10.0 * pipe.t_dom, 0.25 * tau_min) * pipe.prep.rate_hz, n_min / 4))
-
+    smooth = int(min(max(10.0 * pipe.t_dom, 0.25 * _tau_min(pipe)) * pipe.prep.rate_hz, n_min / 4))
     # beside a map the map's constant holds the output's level, and so the mean of a drift fitted after it: the
     # residual the drift sees has zero mean, which a charge from zero cannot match (map_33 of maps.py seed 41: the
     # slow-part fit without a constant left more than no drift, with one it removed 74 %). A constant is then fitted
     # beside the weights and left out of the form: the map gives up the level when it is refitted (core._fit_one)
     level = any(k in effects for k in LEVEL_CARRIERS)
-
-    def ls_at(tau: float) -> EffectFit:
-        def basis(ri, st):
-            q = pipe.charge(st["x_sat"], tau)
+    base = {k: v for k, v in effects.items() if k != "charge_drift"}
+    best, best_c = None, math.inf
+    for tau in taus:
+        def basis(ri, st, tau=float(tau)):
+            q = charge_of(st["x_sat"], tau, ri)
             return [st["y_asym"] * q, pipe.y_s * q] + ([np.full_like(q, pipe.y_s)] if level else [])
 
-        base = {k: v for k, v in effects.items() if k != "charge_drift"}
         g, o = _ls(pipe, base, basis, smooth=smooth)[:2]
-        return EffectFit("charge_drift", "output", (float(tau), float(g), float(o)))
+        f = EffectFit("charge_drift", variant, (float(tau), float(g), float(o)))
+        c = _sse(pipe, _with(effects, f)) if variant != "time" else _time_sse(pipe, base, f, charge_of)
+        if c < best_c:
+            best, best_c = f, c
+    return best, best_c
 
-    best = min((ls_at(float(t)) for t in taus), key=lambda f: _sse(pipe, _with(effects, f)))
+
+def _time_sse(pipe: FitContext, base: dict[str, EffectFit], f: EffectFit, charge_of) -> float:
+    """Training SSE of the one-tau law with the time-only charge ``charge_of`` (not a chain form: computed here)."""
+    tot = 0.0
+    for ri, rec in enumerate(pipe.prep.records):
+        m = rec.train
+        if not m.any():
+            continue
+        st = pipe.stages(base, ri)
+        q = charge_of(st["x_sat"], f.theta[0], ri)
+        y = st["y"] + f.theta[1] * q * st["y_asym"] + pipe.y_s * f.theta[2] * q
+        tot += sumsq((rec.y - y)[m])
+    return tot
+
+
+def _one_tau_refined(pipe: FitContext, effects: dict[str, EffectFit], charge_of, variant: str
+                     ) -> tuple[EffectFit | None, float]:
+    """:func:`_one_tau_fit` on a grid of time constants (0.15-5 x the log, at least :func:`tau_min`), the best
+    refined in ``log tau`` within a factor of two (bounded, 12 evaluations) and kept where lower; the fit and its
+    training SSE (output unit²). No refinement on the full residual: that would undo the slow-only fit."""
+    tmin = _tau_min(pipe)
+    taus = np.unique(np.clip(pipe.span_s * np.array([0.15, 0.3, 0.6, 1.2, 2.5, 5.0]), tmin, None))
+    best, c0 = _one_tau_fit(pipe, effects, charge_of, variant, taus)
+    if best is None:  # no finite cost on the grid
+        return None, math.inf
     lt = math.log(best.theta[0])
-    res = optimize.minimize_scalar(lambda v: _sse(pipe, _with(effects, ls_at(math.exp(v)))),
-                                   bounds=(max(lt - 0.7, math.log(tau_min)), lt + 0.7), method="bounded",
+    res = optimize.minimize_scalar(lambda v: _one_tau_fit(pipe, effects, charge_of, variant,
+                                                          np.array([math.exp(v)]))[1],
+                                   bounds=(max(lt - 0.7, math.log(tmin)), lt + 0.7), method="bounded",
                                    options={"maxiter": 12})
-    cand = ls_at(math.exp(float(res.x)))
-    if _sse(pipe, _with(effects, cand)) < _sse(pipe, _with(effects, best)):
-        best = cand
-    return best  # no refinement on the full residual: that would undo the slow-only fit
+    cand, c1 = _one_tau_fit(pipe, effects, charge_of, variant, np.array([math.exp(float(res.x))]))
+    return (cand, c1) if c1 < c0 else (best, c0)
+
+
+def _fit_travel(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The ``output:travel`` form (:func:`_one_tau_refined` with the swing's charge), or None when the swing's
+    history does not explain the residual better than time alone (:func:`_travel_vs_time`)."""
+    best, c0 = _one_tau_refined(pipe, effects, lambda x, tau, ri: _travel_pipe(pipe, x, tau), TRAVEL)
+    return best if c0 < _travel_vs_time(pipe, effects) else None
+
+
+def _travel_vs_time(pipe: FitContext, effects: dict[str, EffectFit]) -> float:
+    """Training SSE of the time-only rival of the swing: the same law and weights with the charge
+    ``(1 - exp(-t / tau)) T`` (``t`` from each record's start, ``T`` the record's mean swing per second times ``tau``
+    over ``u_s``: what a steady excitation's swing would be), best over a log grid of ``tau``
+    (:data:`TRAVEL_RIVAL_GRID`, :func:`tau_min` to 10 x the log)."""
+    grid = np.geomspace(_tau_min(pipe), 10.0 * pipe.span_s, TRAVEL_RIVAL_GRID)
+
+    def warm(x, tau, ri):
+        t = pipe.prep.records[ri].t_s
+        rate = float(np.sum(np.abs(np.diff(x)))) / max(float(t[-1] - t[0]), 1e-300)
+        return -np.expm1(-(t - t[0]) / tau) * rate * tau / pipe.u_s
+
+    return _one_tau_fit(pipe, effects, warm, "time", grid)[1]
 
 
 def fit_drift_on_repeats(pipe: FitContext, effects: dict[str, EffectFit], period_s: float
@@ -543,14 +699,19 @@ class DriftFamily(EffectFamily):
         output half-ranges)."""
         if fit.variant == TWO_TAU:
             return ("tau_fast_s", "tau_slow_s", "offset_per_fast_charge", "offset_per_slow_charge")
+        if fit.variant == TRAVEL:
+            return ("tau_s", "gain_per_swing", "offset_per_swing")
         return ("tau_s", "gain_per_charge", "offset_per_charge")
 
-    def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> "DriftStage | Drift2Stage":
+    def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> "DriftStage | Drift2Stage | TravelStage":
         """The generic form; the pre-smoothing from ``scales.tau_smooth_s`` or :func:`smoothing_s`
         (``output:2tau``: a tenth of its fast time constant)."""
         if fit.variant == TWO_TAU:
             tf, tsl, of, os_ = fit.theta
             return Drift2Stage(dt_s, tf, tsl, scales.u_s, (scales.y_s * of, scales.y_s * os_))
+        if fit.variant == TRAVEL:
+            tau, g, o = fit.theta
+            return TravelStage(dt_s, tau, scales.u_s, g, scales.y_s * o)
         ts = getattr(scales, "tau_smooth_s", None) or smoothing_s(scales)
         tau, g, o = fit.theta
         return DriftStage(dt_s, (ts, ts, tau), 1.0 / scales.u_s, g, scales.y_s * o)
@@ -583,6 +744,11 @@ class DriftFamily(EffectFamily):
             return {"variant": fit.variant, "tau_fast_s": th[0], "tau_slow_s": th[1],
                     "offset_per_input_half_range_fast": th[2] * ctx.y_s,
                     "offset_per_input_half_range_slow": th[3] * ctx.y_s, "unit": units[1]}
+        if fit.variant == TRAVEL:
+            return {"variant": fit.variant, "tau_s": th[0], "gain_change_per_input_half_range_of_swing": th[1],
+                    "offset_per_input_half_range_of_swing": th[2] * ctx.y_s, "unit": units[1],
+                    "form": "y (1 + g q) + o q, q the input's swing (sum of |du|) over the last tau_s seconds, "
+                            "leaking with tau_s, in input half-ranges: charge injected by each swing"}
         return {"variant": fit.variant, "tau_s": th[0], "gain_change_per_input_half_range": th[1],
                 "offset_per_input_half_range": th[2] * ctx.y_s, "unit": units[1]}
 
