@@ -14,7 +14,8 @@ from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.diagnose.core import DiagnosisFailed, _generalise
 from hasel.diagnose.prep import LinearSim, prepare
 from hasel.diagnose.setup_stages import timing_stage
-from hasel.diagnose.significance import _alike, _block_labels, block_test
+from hasel.diagnose.significance import _alike, block_test
+from hasel.effects.heldout import block_labels as _block_labels
 from hasel_bench.othersim import make_free_case
 
 

@@ -153,6 +153,9 @@ class Pipeline:
         self.thresholds = tuple(2.0 * self.u_s * f for f in HYST_THRESHOLDS)
         self.n_evals = 0
         self.max_degree = _max_degree(u, self.u_s)
+        # the held-out block score a family's own choice between its forms asks (the diagnosis sets its
+        # DiagnoseOptions.t_min here; None: no held-out choice, as outside a diagnosis)
+        self.t_min: float | None = None
         # the measured output piling up on its extreme (a clip): that value is a candidate limit
         self.clips = {end: v for end, (v, _) in flat_extremes(self.prep.records[0].y).items()}
 

@@ -15,7 +15,8 @@ import numpy as np
 from hasel.diagnose.augment import FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, measured_clip
 from hasel.diagnose.options import DiagnoseOptions
 from hasel.diagnose.prep import Prepared
-from hasel.diagnose.significance import _block_labels, block_test, coloured_z
+from hasel.diagnose.significance import block_test, coloured_z
+from hasel.effects.heldout import block_labels
 from hasel.errors import BadInputError
 
 __all__ = ["raised_resonance"]
@@ -63,7 +64,8 @@ class _Context:
             raise BadInputError("too little held-out data to score a model")
         norm_ho = float(np.sum((y_ho - y_ho.mean()) ** 2))
         norm_fi = float(np.sum((y_fi - y_fi.mean()) ** 2))
-        labels_va = _block_labels(prep, "valid")
+        labels_va = block_labels(prep, "valid")
+        pipe.t_min = opts.t_min  # a family choosing between its forms on held-out blocks asks the acceptance's score
         # the slow part left out of the held-out test: opts.wander_s of the log, in stacked validation samples
         n_all = sum(r.t_s.size for r in prep.records)
         per_s = prep.rate_hz * labels_va.size / max(n_all, 1)

@@ -1,6 +1,6 @@
 """Held-out significance of a candidate effect, and explanations that the data cannot separate.
 
-:func:`block_test` (a signed-rank test over held-out blocks) and :func:`coloured_z` (a z score
+:func:`block_test` (a signed-rank test over held-out blocks, :mod:`hasel.effects.heldout`) and :func:`coloured_z` (a z score
 against noise of the measured colour) decide whether an effect's improvement is more than noise;
 :func:`_alike` finds another explanation that scores like the chosen one, with the experiment
 that would separate them (:data:`_SEPARATING`).
@@ -13,68 +13,10 @@ import numpy as np
 
 from hasel.diagnose.augment import LINEAR
 from hasel.diagnose.options import DiagnoseOptions
-from hasel.diagnose.prep import Prepared
+from hasel.effects.heldout import block_test
+from hasel.effects.heldout import moving_average as _moving_average
 
 __all__ = ["block_test", "coloured_z"]
-
-
-def _block_labels(prep: Prepared, mask: str, min_blocks: int = 40, min_len: int = 5) -> np.ndarray:
-    """Block index of each stacked ``mask`` sample for the held-out test.
-
-    The blocks are the contiguous runs of the mask, record by record; when there are fewer
-    than ``min_blocks`` of them (a short log), each run is cut into equal pieces of at least
-    ``min_len`` samples until there are about that many (a rank test over ten blocks
-    cannot reach a small p-value whatever the data).
-    """
-    out, nb = [], 0
-    runs = []
-    for r in prep.records:
-        m = getattr(r, mask)
-        if not m.any():
-            continue
-        starts = np.concatenate([[True], ~m[:-1]]) & m
-        runs.append(np.cumsum(starts)[m] - 1)
-    n_runs = sum(int(x.max()) + 1 for x in runs)
-    for lab in runs:
-        if n_runs < min_blocks:
-            pieces = int(np.ceil(min_blocks / max(n_runs, 1)))
-            sub = np.zeros(lab.size, int)
-            for b in range(int(lab.max()) + 1):
-                idx = np.flatnonzero(lab == b)
-                k = max(1, min(pieces, idx.size // min_len))
-                sub[idx] = np.minimum(np.arange(idx.size) * k // max(idx.size, 1), k - 1)
-            lab = np.unique(lab * 10_000 + sub, return_inverse=True)[1]
-        lab = lab + nb
-        nb = int(lab.max()) + 1
-        out.append(lab)
-    return np.concatenate(out) if out else np.zeros(0, int)
-
-
-def block_test(e_old: np.ndarray, e_new: np.ndarray, labels: np.ndarray, slow_n: int = 0) -> float:
-    """Held-out improvement of a residual ``e_old -> e_new`` as a one-sided normal score over blocks.
-
-    Each residual first loses its slow part (a moving average over ``slow_n`` stacked samples,
-    several seconds of the log: a slow sensor offset wander is no evidence of an effect; 0
-    keeps it). Each held-out block's squared-error drop is then one observation, and the
-    drops are ranked by size (Wilcoxon's signed-rank test: coloured noise within a block
-    counts as it really varies, a few blocks with large drops neither make nor break the
-    test, and no noise level is assumed). The one-sided p-value is given as the normal score
-    with the same p-value. No noise floor enters.
-    """
-    from scipy import stats
-
-    nb = int(labels.max()) + 1 if labels.size else 0
-    if nb < 3:
-        return 0.0
-    if slow_n > 1:
-        e_old = e_old - _moving_average(e_old, slow_n)
-        e_new = e_new - _moving_average(e_new, slow_n)
-    d = (np.bincount(labels, weights=e_old * e_old, minlength=nb)
-         - np.bincount(labels, weights=e_new * e_new, minlength=nb))
-    if not np.any(d):
-        return 0.0
-    p = float(stats.wilcoxon(d, alternative="greater", zero_method="zsplit").pvalue)
-    return float(min(stats.norm.isf(max(p, 1e-300)), 40.0))
 
 
 def coloured_z(e_old: np.ndarray, e_new: np.ndarray, max_lag: int, slow_n: int = 0) -> float:
@@ -104,14 +46,6 @@ def coloured_z(e_old: np.ndarray, e_new: np.ndarray, max_lag: int, slow_n: int =
     var = float(acov[0] * cd[0] + 2.0 * np.sum(w[1:] * acov[1:] * cd[1:]))
     var = max(var, float(acov[0] * cd[0]), 1e-300)
     return float(np.sum(e_old ** 2 - e_new ** 2) / (2.0 * math.sqrt(var)))
-
-
-def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
-    """Centred moving average over ``n`` samples (ends padded with the end values)."""
-    n = int(min(max(n, 1), x.size))
-    pad = np.concatenate([np.full(n // 2, x[0]), x, np.full(n - n // 2 - 1, x[-1])])
-    c = np.cumsum(np.concatenate([[0.0], pad]))
-    return (c[n:] - c[:-n]) / n
 
 
 #: The experiment that separates two explanations that score alike (either order).

@@ -141,6 +141,7 @@ class FitContext(Scales, Protocol):
 
     prep: Any
     t_dom: float
+    t_min: float | None  # the held-out block score a family's choice between forms asks (None: no such choice)
     span_s: float
     clips: dict
 

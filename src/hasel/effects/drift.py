@@ -48,6 +48,7 @@ from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import _ls, _sse, _with, bic_prefers, sumsq
+from hasel.effects.heldout import block_labels, block_test
 from hasel.validate import in_range, positive
 
 __all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "TravelStage", "travel_charge", "TRAVEL", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
@@ -509,21 +510,20 @@ def fit_level_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
 
 def _held_out_prefers(pipe: FitContext, old: dict[str, EffectFit], new: dict[str, EffectFit]) -> bool:
     """True when ``new`` predicts the validation samples better than ``old`` by the diagnosis's held-out block test
-    (:func:`hasel.diagnose.significance.block_test`, slow part kept: a drift is slow) at its acceptance score
-    ``DiagnoseOptions.t_min``; True as well where the fit context has no validation samples (a plant's own fit).
+    (:func:`hasel.effects.heldout.block_test`, slow part kept: a drift is slow) at the context's ``t_min`` (the
+    diagnosis sets it from ``DiagnoseOptions.t_min``, its acceptance score); True as well where the context has no
+    ``t_min`` or no validation samples (a fit outside a diagnosis).
 
     Why: on a chirp whose frequency rises the swing grows through the log as a level drift's charge does, so the two
     are nearly one regressor on training; there the swing took a level drift's place and the set then failed the
     held-out test (combos.py seed 21 #3, multi2.py #6; study h-travel). The swing is taken only where the held-out
     blocks say it is the better law (forms3.py seed 1 #23, a gain lost per cycle: 0.906 -> 0.025)."""
-    from hasel.diagnose.options import DiagnoseOptions  # the diagnosis's test and threshold (a lazy import:
-    from hasel.diagnose.significance import _block_labels, block_test  # diagnose imports the families)
-
+    t_min = getattr(pipe, "t_min", None)
     prep = getattr(pipe, "prep", None)
-    if prep is None or not any(r.valid.any() for r in prep.records):
+    if t_min is None or prep is None or not any(r.valid.any() for r in prep.records):
         return True
-    labels = _block_labels(prep, "valid")
-    return block_test(pipe.residuals(old, "valid"), pipe.residuals(new, "valid"), labels) >= DiagnoseOptions().t_min
+    labels = block_labels(prep, "valid")
+    return block_test(pipe.residuals(old, "valid"), pipe.residuals(new, "valid"), labels) >= t_min
 
 
 #: families whose fit holds the output's level (a constant term): an input map's ``z^0`` through the model's gain, a
