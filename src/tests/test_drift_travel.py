@@ -78,3 +78,29 @@ def test_a_drift_held_by_the_level_stays_the_level_form(chirp):
     v = designs.diagnose_noisy(u, z * (1.0 - 0.03 * lp), 5, RATE_HZ)
     assert "charge_drift" in v.names
     assert next(e for e in v.effects if e["name"] == "charge_drift")["params"]["variant"] == "output"
+
+
+def test_the_swing_replaces_the_level_only_where_the_held_out_blocks_say_so(chirp):
+    """The guard of the swing form (:func:`hasel.effects.drift._held_out_prefers`): outside a diagnosis (no
+    ``t_min`` on the pipeline) it lets the training error decide; with the diagnosis's ``t_min`` a change that does
+    not improve the validation blocks is refused and the swing drift's own validation gain is accepted (the
+    diagnosis's context puts ``DiagnoseOptions.t_min`` there)."""
+    from hasel import paper
+    from hasel.diagnose.augment import Pipeline
+    from hasel.diagnose.options import DiagnoseOptions
+    from hasel.diagnose.prep import prepare
+    from hasel.effects.drift import _held_out_prefers
+
+    t, u, z = chirp
+    q = _leaky(np.abs(np.diff(u, prepend=u[0])), 100.0)
+    num, den = paper.plant_tf()
+    pipe = Pipeline(prepare(t, u, z * (1.0 - 0.12 * q / q.max()), model_den=den), num, den)
+    assert pipe.t_min is None
+    swing = FAMILIES["charge_drift"].fit(pipe, {})
+    assert swing is not None and swing.variant == "output:travel"  # no guard outside a diagnosis
+    nothing, with_swing = {}, {"charge_drift": swing}
+    assert _held_out_prefers(pipe, nothing, nothing)
+    pipe.t_min = DiagnoseOptions().t_min
+    assert not _held_out_prefers(pipe, nothing, nothing)  # no change: a block score of 0
+    assert _held_out_prefers(pipe, nothing, with_swing)
+    assert not _held_out_prefers(pipe, with_swing, nothing)
