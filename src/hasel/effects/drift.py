@@ -249,14 +249,7 @@ class TravelStage:
 
 def _travel_pipe(pipe, x: np.ndarray, tau_s: float) -> np.ndarray:
     """The swing of a pipeline's input ``x`` over ``tau_s`` (s), over ``u_s`` (cached by the pipeline when it can)."""
-    def make():
-        return travel_charge(x, pipe.prep.dt_s, tau_s)[0] / pipe.u_s
-
-    memo = getattr(pipe, "_memo", None)
-    if memo is None:
-        return make()
-    key = ("travel", hashlib.blake2b(np.ascontiguousarray(x).tobytes(), digest_size=16).digest(), tau_s)
-    return memo(key, make)
+    return _input_memo(pipe, "travel", x, (tau_s,), lambda: travel_charge(x, pipe.prep.dt_s, tau_s)[0] / pipe.u_s)
 
 
 def tau_min(pipe) -> float:
@@ -289,17 +282,21 @@ def tau_fast_min(pipe) -> float:
     return max(10.0 * pipe.t_dom, 50.0 * pipe.prep.dt_s)
 
 
+def _input_memo(pipe, tag: str, x: np.ndarray, params: tuple, make):
+    """``make()``, cached by the pipeline (when it caches) under ``tag``, a digest of the input ``x`` and ``params``."""
+    memo = getattr(pipe, "_memo", None)
+    if memo is None:
+        return make()
+    return memo((tag, hashlib.blake2b(np.ascontiguousarray(x).tobytes(), digest_size=16).digest()) + params, make)
+
+
 def _charges2_pipe(pipe, x: np.ndarray, tf: float, tsl: float) -> tuple[np.ndarray, np.ndarray]:
     """The two charges of a pipeline's input ``x`` over ``u_s`` (cached by the pipeline when it can)."""
     def make():
         qf, qs, _ = charges2(x, pipe.prep.dt_s, tf, tsl)
         return qf / pipe.u_s, qs / pipe.u_s
 
-    memo = getattr(pipe, "_memo", None)
-    if memo is None:
-        return make()
-    key = ("charge2", hashlib.blake2b(np.ascontiguousarray(x).tobytes(), digest_size=16).digest(), tf, tsl)
-    return memo(key, make)
+    return _input_memo(pipe, "charge2", x, (tf, tsl), make)
 
 
 def pipe_output(pipe, x: np.ndarray, y: np.ndarray, fit: EffectFit) -> np.ndarray:
