@@ -99,7 +99,8 @@ __all__ = ["EffectFit", "Pipeline", "fit_family", "linear_static", "fit_drift_on
 #: Effect names in chain order of their (first) slot.
 FAMILIES = ("time_delay", "saturation", "static_nonlinearity", "hysteresis", "load_mass",
             "asymmetric_dynamics", "charge_drift", "sensor_nonlinearity")
-#: Families acting before the linear model (a linear model can be re-identified through them).
+#: Families whose fits the diagnosis also tries with the linear model re-identified through them (by name: see
+#: :func:`hasel.diagnose.core._relinear` for why not by slot).
 INPUT_SIDE = ("time_delay", "saturation", "static_nonlinearity", "hysteresis")
 _SLOT = SLOT_ORDER
 
