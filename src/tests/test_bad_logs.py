@@ -65,3 +65,10 @@ def test_identify_on_a_log_too_short_for_a_static_map_says_so(tmp_path, capsys):
     assert main(["identify", str(_write(tmp_path / "short.csv", t, u, y))]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert "too short for a static map (0.299 s)" in err[-1], err
+    # 5 s of a sine that never holds still: longer than one 2 s window, short of the three the map needs
+    t = np.arange(int(5.0 * RATE)) / RATE
+    u = 4.0 + np.sin(10.0 * t)
+    y = 1.35 * (u - 4.0) + 5.4
+    assert main(["identify", str(_write(tmp_path / "five.csv", t, u, y))]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "too short for a static map (5 s)" in err[-1] and "6 s of samples" in err[-1], err

@@ -654,7 +654,7 @@ def _static_map(segs: list[Segment], means: list[tuple[float, float]], t: np.nda
             notes.append(f"static map from {xs.size} stretches where the input holds still (last half of each)")
     if xs.size == 0:
         raise BadInputError(f"the log is too short for a static map ({t[-1] - t[0]:.3g} s): it needs a stretch of "
-                            f"at least 0.2 s where the input holds still, or 2 s of samples")
+                            f"at least 0.2 s where the input holds still, or 6 s of samples (three 2 s windows)")
     smap = fit_static_map(xs, ys)
     if xs.size < 3 or np.ptp(xs) <= 0:
         return smap, None, None
