@@ -88,6 +88,14 @@ def test_an_effect_that_does_not_generalise_is_dropped_with_its_numbers(tmp_path
     assert d["name"] == "time_delay" and "did not generalise" in d["reason"]
     assert d["final_nrmse_with"] > d["final_nrmse_without"]
     assert d["validation_gap_removed"] == 0.4
+    assert d["exercised_by_heldout"] and "do not exercise" not in d["reason"]
+    # a clip the final held-out input never reaches changes nothing there: said so, not called a failure
+    idle = {"saturation": EffectFit("saturation", "input:upper", (1e3,))}
+    kept, dropped = _generalise(pipe, idle, {"saturation": (0.9, None)}, final_sse, norm, ("kV", "mm"),
+                                lambda m: None)
+    (d,) = dropped
+    assert not d["exercised_by_heldout"] and "do not exercise it" in d["reason"]
+    assert d["final_nrmse_with"] == pytest.approx(d["final_nrmse_without"], rel=1e-9)
 
 
 def test_two_explanations_that_score_alike_are_reported_with_the_separating_experiment(tmp_path):
