@@ -331,6 +331,15 @@ class Verdict:
         The noise floor's estimator, ``rms`` (output unit), ``repeats_used``, and how far to trust
         it: ``trust`` in words ("good: ..." or "low: ...") and ``trust_notes``, the reasons a
         list (empty when good: coloured noise, a slow part such as a sensor wander).
+    dropped : list of dict
+        Effects seen in training that the final held-out samples did not confirm, removed from
+        the model: ``name``, ``params``, ``reason`` (words), ``exercised_by_heldout`` (False when
+        the final samples' predictions are the same with and without it: untested there, as a clip
+        the held-out input never reaches, rather than refuted), ``validation_gap_removed`` (share),
+        ``final_nrmse_with`` and ``final_nrmse_without``.
+    ambiguous : list of dict
+        Pairs of explanations the data score alike (``chosen``, ``alternative``, their numbers
+        and the experiment that would separate them).
     """
 
     effects: list[dict]
