@@ -318,6 +318,8 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=180.0)
     ap.add_argument("--json", default=None)
     ap.add_argument("--reuse", action="store_true", help="read back cases already run instead of running them")
+    ap.add_argument("--work", default=None,
+                    help="folder for the tool's outputs (default CORPUS/runs; give one per scorer run at once)")
     a = ap.parse_args(argv)
     corpus = Path(a.corpus).resolve()
     labels = {p.stem: json.loads(p.read_text()) for p in sorted((corpus / "labels").glob("*.json"))}
@@ -328,8 +330,8 @@ def main(argv=None) -> int:
         ids = [i for i in ids if any(i.startswith(q) for q in a.cases.split(","))]
     if a.only:
         ids = [i for i in ids if labels[i]["kind"] == a.only]
-    outdir = corpus / "runs"
-    outdir.mkdir(exist_ok=True)
+    outdir = Path(a.work) if a.work else corpus / "runs"
+    outdir.mkdir(parents=True, exist_ok=True)
     hasel = str(Path(a.hasel).resolve())
 
     def one(i):
