@@ -15,7 +15,7 @@ from hasel.diagnose.core import DiagnosisFailed, _generalise
 from hasel.diagnose.prep import LinearSim, prepare
 from hasel.diagnose.setup_stages import timing_stage
 from hasel.diagnose.significance import _alike, block_test
-from hasel.effects.heldout import block_labels as _block_labels
+from hasel.effects.heldout import block_labels
 from hasel_bench.othersim import make_free_case
 
 
@@ -100,7 +100,7 @@ def test_an_effect_that_does_not_generalise_is_dropped_with_its_numbers(tmp_path
 
 def test_two_explanations_that_score_alike_are_reported_with_the_separating_experiment(tmp_path):
     pipe = _free_pipe(tmp_path)
-    labels = _block_labels(pipe.prep, "valid")
+    labels = block_labels(pipe.prep, "valid")
     rng = np.random.default_rng(4)
     e_old = pipe.residuals({}, "valid") + 0.05 * np.sin(np.arange(labels.size) / 7.0)
     explained = 0.045 * np.sin(np.arange(labels.size) / 7.0)

@@ -1,7 +1,8 @@
 """Held-out significance of a candidate effect, and explanations that the data cannot separate.
 
-:func:`block_test` (a signed-rank test over held-out blocks, :mod:`hasel.effects.heldout`) and :func:`coloured_z` (a z score
-against noise of the measured colour) decide whether an effect's improvement is more than noise;
+:func:`block_test` (a signed-rank test over held-out blocks, :mod:`hasel.effects.heldout`) and
+:func:`coloured_z` (a z score against noise of the measured colour) decide whether an effect's
+improvement is more than noise;
 :func:`_alike` finds another explanation that scores like the chosen one, with the experiment
 that would separate them (:data:`_SEPARATING`).
 """
@@ -13,8 +14,7 @@ import numpy as np
 
 from hasel.diagnose.augment import LINEAR
 from hasel.diagnose.options import DiagnoseOptions
-from hasel.effects.heldout import block_test
-from hasel.effects.heldout import moving_average as _moving_average
+from hasel.effects.heldout import block_test, moving_average
 
 __all__ = ["block_test", "coloured_z"]
 
@@ -32,8 +32,8 @@ def coloured_z(e_old: np.ndarray, e_new: np.ndarray, max_lag: int, slow_n: int =
     ``slow_n`` samples), so that a fit to slow sensor wander earns nothing here.
     """
     if slow_n > 1:
-        e_old = e_old - _moving_average(e_old, slow_n)
-        e_new = e_new - _moving_average(e_new, slow_n)
+        e_old = e_old - moving_average(e_old, slow_n)
+        e_new = e_new - moving_average(e_new, slow_n)
     delta = e_old - e_new
     r = e_new - e_new.mean()
     n = r.size

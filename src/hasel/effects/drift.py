@@ -29,8 +29,9 @@ Forms
   last ``tau`` seconds, leaking with ``tau``, from none, over ``u_s`` (:func:`travel_charge`): a gain lost with
   cycling, which recovers at rest. Fitted as ``output`` (weights on slow parts for a grid of time constants) and
   taken in its place when its training error is lower, the held-out blocks prefer it at the diagnosis's acceptance
-  score (:func:`_held_out_prefers`), and the swing's history explains the residual better than time alone does (:func:`_travel_vs_time`: on a steady excitation the swing grows as ``1 - exp(-t / tau)``, a
-  function of time a warm-up also is).
+  score (:func:`_held_out_prefers`), and the swing's history explains the residual better than time alone does
+  (:func:`_travel_vs_time`: on a steady excitation the swing grows as ``1 - exp(-t / tau)``, a function of time a
+  warm-up also is).
 
 The truth and ``output`` run :class:`DriftStage` (a chain of first-order low-passes from zero,
 their states carried between chunks, and the law :func:`drift_law`); ``output:2tau`` runs
