@@ -4,6 +4,13 @@ import sys
 
 from tally import SETS, load_rows, names_of, truth_of
 
+
+
+def _num(x) -> float:
+    """A row's figure, NaN where it is missing or None (a case that failed)."""
+    return float("nan") if x is None else float(x)
+
+
 base, new = sys.argv[1:3]
 for s in SETS:
     ra, rb = load_rows(base, s), load_rows(new, s)
@@ -16,4 +23,4 @@ for s in SETS:
             tag = a.get("kind") or a.get("name") or a.get("case") or ""
             print(f"{s:12s} #{i:<3d} {str(tag)[:40]:40s} truth {','.join(sorted(truth)) or 'none'}: "
                   f"{','.join(sorted(na)) or 'none'} -> {','.join(sorted(nb)) or 'none'} "
-                  f"(shrink {a.get('shrink', float('nan')):.2f} -> {b.get('shrink', float('nan')):.2f})")
+                  f"(shrink {_num(a.get('shrink')):.2f} -> {_num(b.get('shrink')):.2f})")
