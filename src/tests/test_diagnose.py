@@ -12,7 +12,7 @@ from hasel import paper
 from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel_bench.blind import excitation
 from hasel.diagnose.linfit import fit_linear
-from hasel.diagnose.prep import LinearSim, estimate_noise, nrmse, prepare
+from hasel.diagnose.prep import LinearSim, estimate_noise, excited_band_hz, nrmse, prepare
 from hasel.diagnose.where import model_error_model
 from hasel.effects import EFFECT_NAMES, TruthActuator, from_name
 from hasel.errors import BadInputError
@@ -63,6 +63,24 @@ def test_prepare_rate_split_and_blocks():
     r0, r1 = p2.records
     assert r1.hold.all() and not r1.valid.any() and not r0.hold.any()
     assert 0.25 < r0.valid.mean() < 0.4 and np.all(r0.train ^ r0.valid)
+
+
+def test_prepare_keeps_the_whole_log_when_a_lower_whole_rate_allows():
+    # a 50 s, 2 kHz chirp to 40 Hz: the cap of 60 000 working samples asks for 1.2 kHz, which is no whole
+    # factor of 2 kHz; rounding the factor down kept 2 kHz and cut the log after 30 s (its last operating
+    # level lost). Factor 2 (1 kHz, above 8 x the band's top) keeps all 50 s
+    fs = 2000.0
+    t = np.arange(100_000) / fs
+    u = 4.0 + np.sin(2 * np.pi * (0.5 + 0.39 * t) * t)
+    p = prepare(t, u, u, max_samples=60_000)
+    assert p.decimation == 2 and p.info["truncated_to_s"] is None
+    assert p.records[0].t_s[-1] - p.records[0].t_s[0] == pytest.approx(50.0, abs=0.01)
+    # where no whole factor at or above 8 x the band's top fits the cap, the lowest such rate is used and the
+    # log is cut there, and says so
+    q_min_rate = int(fs // (8 * excited_band_hz(u, fs)))
+    p2 = prepare(t, u, u, max_samples=20_000)
+    assert p2.decimation == q_min_rate and p2.records[0].u.size == 20_000
+    assert p2.info["truncated_to_s"] == pytest.approx(20_000 * q_min_rate / fs, rel=1e-3)
 
 
 def test_prepare_rejects_unusable_logs():

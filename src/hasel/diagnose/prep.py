@@ -301,6 +301,12 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     else:
         target = float(target_rate_hz)
     q = max(1, int(np.floor(fs / target)))
+    if target_rate_hz is None and t.size > q * max_samples:
+        # rounding fs / target down to a whole factor can leave more than max_samples (a 2 kHz log whose
+        # target is 1.2 kHz keeps q = 1), and the tail of the log would be cut: take the smallest factor that
+        # fits the whole log, down to the lowest rate the band allows (8 x its top)
+        q_fit = int(math.ceil(t.size / max_samples))
+        q = max(q, min(q_fit, max(1, int(np.floor(fs / (8.0 * f_bw))))))
     records = []
     hold_log = None
     if heldout is not None:
