@@ -12,7 +12,8 @@ from hasel import paper
 from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel_bench.blind import excitation
 from hasel.diagnose.linfit import fit_linear
-from hasel.diagnose.prep import LinearSim, estimate_noise, excited_band_hz, nrmse, prepare
+from hasel.diagnose.prep import (LinearSim, dominant_time_constant_s, estimate_noise, excited_band_hz, nrmse, prepare,
+                                 rest_start)
 from hasel.diagnose.where import model_error_model
 from hasel.effects import EFFECT_NAMES, TruthActuator, from_name
 from hasel.errors import BadInputError
@@ -81,6 +82,34 @@ def test_prepare_keeps_the_whole_log_when_a_lower_whole_rate_allows():
     p2 = prepare(t, u, u, max_samples=20_000)
     assert p2.decimation == q_min_rate and p2.records[0].u.size == 20_000
     assert p2.info["truncated_to_s"] == pytest.approx(20_000 * q_min_rate / fs, rel=1e-3)
+
+
+def test_an_unsettled_start_is_simulated_from_the_rest_its_output_shows():
+    # a closed loop's log: the controller commands 9 kV at the first sample while the stroke is still 0 mm (the
+    # plant at rest at 0 kV before). Simulated at rest with its first input, the model starts 12 mm off
+    num, den = _nominal()
+    rate = 1000.0
+    rng = np.random.default_rng(3)
+    u = np.concatenate([np.full(50, 9.0), np.repeat(rng.uniform(1.0, 6.0, 40), 250)])
+    t = np.arange(u.size) / rate
+    y = LinearSim(num, den, rate).run(np.concatenate([[0.0], u]))[1:] + 0.005 * rng.standard_normal(u.size)
+    p = prepare(t, u, y, heldout=(t, u, y), target_rate_hz=rate)
+    tau = dominant_time_constant_s(den)
+    notes = rest_start(p, num, den)
+    assert [n["record"] for n in notes] == [0, 1]
+    assert all(abs(n["level"]) < 0.01 and n["first_input"] == 9.0 for n in notes)
+    assert notes[0]["left_out_s"] == pytest.approx(3 * tau, abs=2 / rate)
+    for r in p.records:
+        # one sample before the log at the level found, then the log; the first three time constants in no score
+        assert r.u.size == u.size + 1 and r.u[0] == notes[0]["level"] and r.u[1] == 9.0
+        scored = r.train | r.valid | r.hold
+        assert not scored[:int(3 * tau * rate)].any() and scored[int(3 * tau * rate) + 2:].mean() > 0.6
+    e = p.records[1].y - p.sim(num, den).run(p.records[1].u)
+    assert np.sqrt(np.mean(e[p.records[1].hold] ** 2)) < 0.01   # down to the noise: no start artefact left
+    # a log that starts settled (or whose first output agrees with rest at its first input) is left alone
+    y2 = LinearSim(num, den, rate).run(u) + 0.005 * rng.standard_normal(u.size)
+    p2 = prepare(t, u, y2, target_rate_hz=rate)
+    assert rest_start(p2, num, den) == [] and p2.records[0].u.size == u.size
 
 
 def test_prepare_rejects_unusable_logs():

@@ -60,7 +60,7 @@ from hasel.diagnose.context import (Candidate, _Context, _fixed, _pick, _raises,
 from hasel.diagnose.options import DiagnoseOptions, DiagnosisFailed, Verdict
 from hasel.diagnose.pool import jobs as pool_jobs
 from hasel.diagnose.pool import pmap
-from hasel.diagnose.prep import prepare
+from hasel.diagnose.prep import prepare, rest_start
 from hasel.diagnose.setup_stages import (AT_BOUND_NOTE, _model_stage, _noise_stage, _nominal_model, at_shift_bound,
                                          grid_then_bounded, shift_range)
 from hasel.diagnose.significance import _alike, block_test, coloured_z
@@ -836,6 +836,7 @@ def _heldout_summary(ctx: _Context, st: _State, nrmse_nom: float, nrmse_nom_va: 
     return {"nrmse_nominal": nrmse_nom, "nrmse_augmented": nrmse_aug, "split": ctx.prep.split,
             "n_samples": int(ctx.prep.stacked("y", "hold").size), "gap_shrink": shrink,
             "truncated_to_s": ctx.prep.info.get("truncated_to_s"),
+            "unsettled_start": ctx.prep.info.get("rest_start") or [],
             "parts": {"train_samples": int(ctx.n_tr), "validation_samples": int(ctx.n_va),
                       "final_samples": int(ctx.prep.stacked("y", "hold").size),
                       "note": "effects are chosen, accepted and ranked on the validation samples; these "
@@ -843,6 +844,16 @@ def _heldout_summary(ctx: _Context, st: _State, nrmse_nom: float, nrmse_nom_va: 
             "validation": {"nrmse_nominal": nrmse_nom_va, "nrmse_augmented": ctx.to_nrmse(st.mse_ho),
                            "noise_floor_nrmse": ctx.floor_va},
             "augmented_over_floor": nrmse_aug / floor if floor > 0 else float("inf")}
+
+
+def _rest_stage(prep, num, den, say) -> None:
+    """Stage: records that start unsettled start from the rest their first output shows (:func:`rest_start`);
+    the notes go to ``prep.info["rest_start"]``."""
+    notes = rest_start(prep, num, den)
+    prep.info["rest_start"] = notes
+    for n in notes:
+        say(f"{'held-out log' if n['record'] else 'log'}: starts unsettled, simulated from rest at {n['level']:.4g} "
+            f"(its first input {n['first_input']:.4g}); its first {n['left_out_s']:.3g} s left out of every score")
 
 
 def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldout: tuple | None = None,
@@ -889,7 +900,11 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     n_jobs = pool_jobs()
     say(f"estimate: about {_estimate_s(n_work, opts, n_jobs):.0f} s on {n_jobs} unloaded "
         f"{'core' if n_jobs == 1 else 'cores'} (twice that on a busy machine)")
+    if num is not None:
+        _rest_stage(prep, num, den, say)
     num, den, source, timing, clips = _model_stage(prep, num, den, source, opts, say)
+    if "rest_start" not in prep.info:
+        _rest_stage(prep, num, den, say)
     pipe = Pipeline(prep, num, den, delay_s=float(source.get("delay_s", 0.0) or 0.0))
 
     if prep.stacked("y", "valid").size < 10 or prep.stacked("y", "hold").size < 10:

@@ -43,7 +43,7 @@ from hasel.metrics import nrmse
 from hasel.signals import uniform_grid
 
 __all__ = ["Record", "Prepared", "LinearSim", "StartRun", "at_offset", "estimate_timing", "prepare", "estimate_noise", "excited_band_hz",
-           "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust"]
+           "dominant_time_constant_s", "nrmse", "flat_extremes", "noise_trust", "rest_start"]
 
 
 @dataclass
@@ -340,6 +340,62 @@ def prepare(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, heldout: tuple | N
     return Prepared(records=records, rate_hz=fs / q, decimation=q, f_excited_hz=f_u, split=split,
                     info={"original_rate_hz": fs, "n_original": int(t.size), "truncated_to_s": truncated},
                     sample_offset=zoh_offset(q))
+
+
+#: A record's start is unsettled when its input moves by more than this share of its range within the
+#: model's slowest time constant of the first sample (a closed loop's first commands, a log cut mid-run).
+START_MOVE_SHARE = 1e-3
+#: ... and its first output is further than this share of the output's range from the model at rest with the
+#: first input (so "at rest with the first input before the log" is contradicted by the data themselves).
+START_GAP_SHARE = 0.05
+#: Unsettled starts: the first this many slowest time constants are left out of every score (the state before
+#: the log is a guess, and a wrong guess decays over them).
+START_BURN_TAUS = 3.0
+
+
+def rest_start(prep: Prepared, num: np.ndarray, den: np.ndarray) -> list[dict]:
+    """Where a record starts unsettled, the rest before it is read from its first output (records changed in place).
+
+    Every simulation here starts at rest with its first input sample. A closed-loop log whose controller
+    commands 9 kV at its first sample while the stroke is still 0 mm contradicts that: the model starts
+    12 mm off and every effect is judged on a transient that is an artefact of the assumed start. Where
+    the input moves within the model's slowest time constant (:data:`START_MOVE_SHARE`) and the first
+    output is far from the model at rest with the first input (:data:`START_GAP_SHARE` of the output's
+    range), one working sample is put before the record at the input level whose steady output under the
+    model (``num``/``den``, input unit to output unit) is the first output (within the input's range widened
+    by that range on either side),
+    and the first :data:`START_BURN_TAUS` slowest time constants are left out of training, validation and
+    final scores (the level is the linear model's, not the augmented chain's). Returns one note per
+    changed record: ``record``, ``level`` (input unit), ``first_input``, ``left_out_s``.
+    """
+    num = np.atleast_1d(np.asarray(num, float))
+    den = np.atleast_1d(np.asarray(den, float))
+    g0 = float(np.polyval(num, 0.0) / np.polyval(den, 0.0)) if np.polyval(den, 0.0) != 0 else float("nan")
+    tau = dominant_time_constant_s(den)
+    if not (math.isfinite(g0) and g0 != 0.0 and math.isfinite(tau)):
+        return []
+    dt = prep.dt_s
+    n_tau = max(3, int(math.ceil(tau / dt)))
+    notes = []
+    for i, r in enumerate(prep.records):
+        if r.u.size < 4 * n_tau:
+            continue
+        u_rng, y_rng = float(np.ptp(r.u)), float(np.ptp(r.y))
+        moves = float(np.ptp(r.u[:n_tau])) > START_MOVE_SHARE * u_rng
+        y0 = float(r.y[0])
+        if not (moves and y_rng > 0 and abs(y0 - g0 * float(r.u[0])) > START_GAP_SHARE * y_rng):
+            continue
+        # bounded to the input's range widened by that range on either side (an output offset reads as a level)
+        level = float(np.clip(y0 / g0, np.min(r.u) - u_rng, np.max(r.u) + u_rng))
+        n_burn = min(int(math.ceil(START_BURN_TAUS * tau / dt)), r.u.size // 4)
+        keep = np.ones(r.u.size, bool)
+        keep[:n_burn] = False
+        pre = np.zeros(1, bool)
+        prep.records[i] = Record(np.concatenate([[r.t_s[0] - dt], r.t_s]), np.concatenate([[level], r.u]),
+                                 np.concatenate([[y0], r.y]), np.concatenate([pre, r.train & keep]),
+                                 np.concatenate([pre, r.hold & keep]), np.concatenate([pre, r.valid & keep]))
+        notes.append({"record": i, "level": level, "first_input": float(r.u[0]), "left_out_s": n_burn * dt})
+    return notes
 
 
 def zoh_offset(q: int) -> float:
