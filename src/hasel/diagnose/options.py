@@ -212,9 +212,10 @@ class DiagnoseOptions:
     n_blocks : int
         Interleaved blocks of a self-held-out split. [design]
     max_samples : int
-        Cap on working samples [for time: diagnosis time grows with it]; beyond it, at the lowest rate
-        the band allows, only the first ``max_samples`` samples are diagnosed (40 000 cut a
-        repeat-based drift test log short: 60 000 kept).
+        Cap on working samples [for time: diagnosis time grows with it]: the working rate is lowered to the
+        smallest whole decimation that fits the log in it, down to 8 x the excited band's top; only where
+        even that rate leaves more are the first ``max_samples`` samples diagnosed (said in the verdict:
+        ``heldout.truncated_to_s``). 40 000 cut a repeat-based drift test log short: 60 000 kept.
     max_order : int
         Largest order of the internal linear fit. [design]
     progress : callable or None
