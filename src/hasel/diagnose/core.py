@@ -64,7 +64,7 @@ from hasel.diagnose.prep import prepare, rest_start
 from hasel.diagnose.setup_stages import (AT_BOUND_NOTE, _model_stage, _noise_stage, _nominal_model, at_shift_bound,
                                          grid_then_bounded, shift_range)
 from hasel.diagnose.significance import _alike, block_test, coloured_z
-from hasel.diagnose.wording import _evidence
+from hasel.diagnose.wording import _evidence, unsettled_start_text
 from hasel.effects.drift import LEVEL_CARRIERS, TRAVEL, fit_level_forms
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.registry import family
@@ -852,8 +852,7 @@ def _rest_stage(prep, num, den, say) -> None:
     notes = rest_start(prep, num, den)
     prep.info["rest_start"] = notes
     for n in notes:
-        say(f"{'held-out log' if n['record'] else 'log'}: starts unsettled, simulated from rest at {n['level']:.4g} "
-            f"(its first input {n['first_input']:.4g}); its first {n['left_out_s']:.3g} s left out of every score")
+        say(unsettled_start_text(n))
 
 
 def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldout: tuple | None = None,
@@ -900,10 +899,13 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
     n_jobs = pool_jobs()
     say(f"estimate: about {_estimate_s(n_work, opts, n_jobs):.0f} s on {n_jobs} unloaded "
         f"{'core' if n_jobs == 1 else 'cores'} (twice that on a busy machine)")
-    if num is not None:
+    # the start is judged with the model: a given one before the set-up stages use the records, an identified
+    # one once it exists
+    given = num is not None
+    if given:
         _rest_stage(prep, num, den, say)
     num, den, source, timing, clips = _model_stage(prep, num, den, source, opts, say)
-    if "rest_start" not in prep.info:
+    if not given:
         _rest_stage(prep, num, den, say)
     pipe = Pipeline(prep, num, den, delay_s=float(source.get("delay_s", 0.0) or 0.0))
 

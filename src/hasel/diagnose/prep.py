@@ -348,11 +348,11 @@ START_MOVE_SHARE = 1e-3
 #: ... and its first output is further from the model at rest with the first input than this share of the
 #: output's range ...
 START_GAP_SHARE = 0.05
-#: ... and than this many times the rms of that simulation's residual after the first three time constants (so
-#: "at rest with the first input before the log" is contradicted by the start, not by an effect that bends the
-#: whole log: a map or a drift gives a start gap of the size of the residual everywhere). Set on the tuning logs:
-#: those that start at rest with their first input (bench/tune_diag's sets, effects of every family) reach 5.0
-#: (combos.py seed 21 combo_16), the first corpus's closed-loop logs 7.0 (a large input map beside) to 430.
+#: ... and than this many times the rms of that simulation's residual after the first :data:`START_BURN_TAUS` time
+#: constants (so "at rest with the first input before the log" is contradicted by the start, not by an effect that
+#: bends the whole log: a map or a drift gives a start gap of the size of the residual everywhere). Set on the
+#: tuning logs: those that start at rest with their first input (bench/tune_diag's sets, effects of every family)
+#: reach 5.0 (combos.py seed 21 combo_16), the first corpus's closed-loop logs 7.0 (a large input map beside) to 430.
 START_GAP_RMS = 6.0
 #: Unsettled starts: the first this many slowest time constants are left out of every score (the state before
 #: the log is a guess, and a wrong guess decays over them).
@@ -383,6 +383,7 @@ def rest_start(prep: Prepared, num: np.ndarray, den: np.ndarray) -> list[dict]:
     dt = prep.dt_s
     n_tau = max(3, int(math.ceil(tau / dt)))
     notes = []
+    sim = None  # built only where a start is unsettled
     for i, r in enumerate(prep.records):
         if r.u.size < 4 * n_tau:
             continue
@@ -392,13 +393,13 @@ def rest_start(prep: Prepared, num: np.ndarray, den: np.ndarray) -> list[dict]:
         gap = abs(y0 - g0 * float(r.u[0]))
         if not (moves and y_rng > 0 and gap > START_GAP_SHARE * y_rng):
             continue
-        n3 = min(int(math.ceil(3.0 * tau / dt)), r.u.size // 4)
-        e = r.y - prep.sim(num, den).run(r.u)
-        if not gap > START_GAP_RMS * math.sqrt(float(np.mean(e[n3:] ** 2))):
+        n_burn = min(int(math.ceil(START_BURN_TAUS * tau / dt)), r.u.size // 4)
+        sim = sim or prep.sim(num, den)
+        e = r.y - sim.run(r.u)
+        if not gap > START_GAP_RMS * math.sqrt(float(np.mean(e[n_burn:] ** 2))):
             continue
         # bounded to the input's range widened by that range on either side (an output offset reads as a level)
         level = float(np.clip(y0 / g0, np.min(r.u) - u_rng, np.max(r.u) + u_rng))
-        n_burn = min(int(math.ceil(START_BURN_TAUS * tau / dt)), r.u.size // 4)
         keep = np.ones(r.u.size, bool)
         keep[:n_burn] = False
         pre = np.zeros(1, bool)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hasel.diagnose.wording import unsettled_start_text
 from hasel.errors import BadInputError
 
 __all__ = ["write_report", "verdict_lines", "closest_unnamed", "LEFT_OVER_FLOOR"]
@@ -44,10 +45,7 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
         lines.append(f"  re-estimated beside the named effects (set-up: {_signed(tm['set_up_original_samples'], 2)} samples); "
                      f"an output lag of {1e3 * lag['tau_rising_s']:.3g} / {1e3 * lag['tau_falling_s']:.3g} ms "
                      f"(rising / falling), under one sample, is this offset and is not named")
-    for n in h.get("unsettled_start") or []:
-        lines.append(f"{'held-out log' if n['record'] else 'log'} starts unsettled (input {n['first_input']:.4g} "
-                     f"{units[0]} at its first sample, output far from rest with it): simulated from rest at "
-                     f"{n['level']:.4g} {units[0]}, its first {n['left_out_s']:.3g} s left out of every score")
+    lines += [unsettled_start_text(n, units[0]) for n in h.get("unsettled_start") or []]
     test = getattr(v, "test", {}) or {}
     over = h["nrmse_nominal"] / floor if floor > 0 else float("inf")
     if not v.effects:

@@ -107,3 +107,12 @@ def _pct(x: float) -> str:
     if abs(x) < 0.005:
         return "less than 0.5 %" if x >= 0 else "a negative share (it helps nothing)"
     return f"{100 * x:.0f} %" if abs(x) >= 0.1 else f"{100 * x:.1f} %"
+
+
+def unsettled_start_text(note: dict, input_unit: str = "") -> str:
+    """One line for a record that starts unsettled (an entry of the verdict's ``heldout.unsettled_start``:
+    ``record``, ``level`` and ``first_input`` in the input unit, ``left_out_s`` in s)."""
+    u = f" {input_unit}" if input_unit else ""
+    return (f"{'held-out log' if note['record'] else 'log'} starts unsettled (input {note['first_input']:.4g}{u} "
+            f"at its first sample, output far from rest with it): simulated from rest at {note['level']:.4g}{u}, "
+            f"its first {note['left_out_s']:.3g} s left out of every score")
