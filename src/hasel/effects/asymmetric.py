@@ -9,7 +9,11 @@ Forms
   constant ``tau_fall exp(k w)`` log-linear in the level ``w = (y - y_c) / y_s``
   (:func:`lag`; ``k = 0`` runs the truth form's kernel);
 - generic ``rate_limit:falling|rising`` (``(R,)``): the output follows at once, but moves
-  at most ``R`` per second in that direction (:func:`speed_limit`).
+  at most ``R`` per second in that direction (:func:`speed_limit`);
+- generic ``input`` (``(tau_rise, tau_fall)``): the same direction-dependent lag on the
+  voltage, before the input map and the dynamics (an amplifier that charges the actuator
+  fast and lets it discharge through a resistor, or the reverse); slot
+  ``asymmetric_dynamics:input`` of :data:`hasel.effects.base.SLOT_ORDER`.
 
 All carry their last output between chunks (:class:`LagStage`, :class:`SpeedStage`).
 """
@@ -26,11 +30,13 @@ from hasel.effects.fitkit import _refine, _sse, _with, fit_log_scalar, rate_grid
 from hasel.effects.operators import asymmetric_lag, exp_level_lag, rate_limited, rate_step
 from hasel.validate import in_range, positive
 
-__all__ = ["AsymmetricDynamics", "DIRECTIONS", "speed_limit", "lag", "LagStage", "SpeedStage",
+__all__ = ["AsymmetricDynamics", "DIRECTIONS", "INPUT", "speed_limit", "lag", "LagStage", "SpeedStage",
            "AsymmetricFamily", "FAMILY"]
 
 #: Directions a speed limit of the output may act in.
 DIRECTIONS = ("falling", "rising")
+#: The variant of the lag on the voltage (before the dynamics).
+INPUT = "input"
 
 
 @dataclass(frozen=True)
@@ -169,6 +175,21 @@ def _fit_asym(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
             lambda v, variant=variant: _sse(pipe, _with(effects, EffectFit("asymmetric_dynamics", variant, (v,)))), grid)
         if c < best_cost:
             best, best_cost = EffectFit("asymmetric_dynamics", variant, (rate,)), c
+    # or the lag on the voltage, before the dynamics: the same grid of starts, refined
+    best_in, c_in = None, np.inf
+    for k in (0.15, 0.5, 1.5, 4.0):
+        for slow_down in (True, False):
+            th = (0.0, k * tdom) if slow_down else (k * tdom, 0.0)
+            fit = EffectFit("asymmetric_dynamics", INPUT, th)
+            c = _sse(pipe, _with(effects, fit))
+            if c < c_in:
+                best_in, c_in = fit, c
+    if best_in is not None:
+        lag_in = _refine(pipe, effects, best_in, np.array([0.0, 0.0]), np.array([hi, hi]), max_nfev=15,
+                         x_scale=np.array([0.1 * tdom, 0.1 * tdom]))
+        c = _sse(pipe, _with(effects, lag_in))
+        if c < best_cost:
+            best, best_cost = lag_in, c
     return best
 
 
@@ -178,7 +199,7 @@ class AsymmetricFamily(EffectFamily):
 
     name = "asymmetric_dynamics"
     slot = "output"
-    variants = ("output", "rate_limit")
+    variants = ("output", "rate_limit", INPUT)
     warm_start = True
     truth_class = AsymmetricDynamics
 
@@ -189,9 +210,12 @@ class AsymmetricFamily(EffectFamily):
         return ("tau_rising_s", "tau_falling_s", "falling_tau_level_slope")[:len(fit.theta)]
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LagStage:
-        """The lag (normalised by ``scales.y_c``/``y_s``) or the speed limit."""
+        """The lag (normalised by ``scales.y_c``/``y_s``; on the input by ``u_c``/``u_s``) or the speed limit."""
         if fit.variant.startswith("rate_limit"):
             return SpeedStage(fit.theta[0], dt_s, fit.variant.split(":")[1])
+        if fit.variant == INPUT:
+            th, uc, us = fit.theta, scales.u_c, scales.u_s
+            return LagStage(lambda x, z0: lag(x, dt_s, th, uc, us, z0))
         th, yc, ys = fit.theta, scales.y_c, scales.y_s
         return LagStage(lambda x, z0: lag(x, dt_s, th, yc, ys, z0))
 
@@ -207,11 +231,12 @@ class AsymmetricFamily(EffectFamily):
         return _fit_asym(ctx, effects)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
-        """Speed > 0; time constants in [0, 20 t_dom], level slope in [-3, 3]."""
+        """Speed > 0; time constants in [0, 20 t_dom], level slope in [-3, 3] (none on the input)."""
         if fit.variant.startswith("rate_limit"):
             return np.array([1e-12]), np.array([np.inf])
         tdom = max(ctx.t_dom, 2 * ctx.prep.dt_s)
-        return np.array([0.0, 0.0, -3.0]), np.array([20.0 * tdom, 20.0 * tdom, 3.0])
+        n = len(fit.theta)
+        return np.array([0.0, 0.0, -3.0])[:n], np.array([20.0 * tdom, 20.0 * tdom, 3.0])[:n]
 
     def form_limits(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """The upper time constants and the slope's range (a time constant of zero is a direction without a
@@ -238,6 +263,10 @@ class AsymmetricFamily(EffectFamily):
             return out
         out["tau_rising_s"] = th[0] if th[0] >= 1e-6 else 0.0
         out["tau_falling_s"] = th[1] if th[1] >= 1e-6 else 0.0
+        if fit.variant == INPUT:
+            out["form"] = ("lag of the input (before the dynamics): tau_rising while it rises, tau_falling while "
+                           "it falls")
+            return out
         out["falling_tau_level_slope"] = th[2]
         out["form"] = "lag: tau_rising while rising, tau_falling*exp(k*w) while falling, w = (y - c)/s"
         return out
