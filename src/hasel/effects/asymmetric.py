@@ -177,13 +177,16 @@ def _fit_asym(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
             best, best_cost = EffectFit("asymmetric_dynamics", variant, (rate,)), c
     # or the lag on the voltage, before the dynamics: the same grid of starts, refined
     best_in, c_in = None, np.inf
+    # (the faster direction is not always instant: an amplifier's charging lag is short, not none, and left at
+    # zero a delay then takes its place)
     for k in (0.15, 0.5, 1.5, 4.0):
-        for slow_down in (True, False):
-            th = (0.0, k * tdom) if slow_down else (k * tdom, 0.0)
-            fit = EffectFit("asymmetric_dynamics", INPUT, th)
-            c = _sse(pipe, _with(effects, fit))
-            if c < c_in:
-                best_in, c_in = fit, c
+        for r in (0.0, 0.1):
+            for slow_down in (True, False):
+                th = (r * k * tdom, k * tdom) if slow_down else (k * tdom, r * k * tdom)
+                fit = EffectFit("asymmetric_dynamics", INPUT, th)
+                c = _sse(pipe, _with(effects, fit))
+                if c < c_in:
+                    best_in, c_in = fit, c
     if best_in is not None:
         lag_in = _refine(pipe, effects, best_in, np.array([0.0, 0.0]), np.array([hi, hi]), max_nfev=15,
                          x_scale=np.array([0.1 * tdom, 0.1 * tdom]))
