@@ -5,8 +5,8 @@
 - Truth forms: :class:`hasel.effects.TruthActuator` with the file's P(s) (the same
   chain and stages as ``--plant truth:...``).
 - Fitted forms: :class:`FittedChain`, the diagnosis's chain (delay, input clip or slew
-  limit, input map, hysteresis, map after the hysteresis, P(s) with load, internal map, asymmetric lag or speed
-  limit, drift, output clip, sensor map) run by each family's own chunked stage
+  limit, input lag, input map, hysteresis, map after the hysteresis, P(s) with load, internal map,
+  asymmetric lag or speed limit, drift, output clip, sensor map) run by each family's own chunked stage
   (:meth:`hasel.effects.base.EffectFamily.stage`), driven by the applied voltage. A
   *measured* clip (the range of the sensor that recorded the data, e.g. a laser reading
   nothing below 0 mm) is not part of the actuator: the simulated sensors have their own
@@ -22,6 +22,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from hasel.effects.asymmetric import INPUT as ASYM_INPUT
 from hasel.effects.base import EffectFit, Stage
 from hasel.lti import SosFilter, zoh_sos
 from hasel.plant import ActuatorSamples, NominalActuator, NominalConfig, amplifier_filter_tf
@@ -80,7 +81,8 @@ class FittedChain:
         self._hyst = stage("hysteresis")
         self._map_hyst = stage("static_nonlinearity", "after_hysteresis")  # a map of the hysteresis output
         self._map_int = stage("static_nonlinearity", "internal")
-        self._asym = stage("asymmetric_dynamics")
+        self._asym_in = stage("asymmetric_dynamics", ASYM_INPUT)  # the lag of the voltage, before the dynamics
+        self._asym = None if self._asym_in is not None else stage("asymmetric_dynamics")
         self._drift = stage("charge_drift")
         self._sat_out = stage("saturation", "output")
         self._sensor = stage("sensor_nonlinearity")
@@ -89,7 +91,7 @@ class FittedChain:
         # the input-side stages sit between the amplifier and P(s): P(s) then sees the applied
         # voltage (trapezoidal mean over each sample); without them the command -> stroke path
         # is discretised exactly, as in NominalActuator
-        self._split = any(s is not None for s in (self._delay, self._sat_in, self._map_in, self._hyst,
+        self._split = any(s is not None for s in (self._delay, self._sat_in, self._asym_in, self._map_in, self._hyst,
                                                       self._map_hyst))
         if "load_mass" in fits:
             self._lin: Stage = FAMILIES["load_mass"].stage(fits["load_mass"], sc, dt)
@@ -106,7 +108,7 @@ class FittedChain:
         c = float(command_kv)
         self._amp.reset(c)
         x = _rest(self._delay, c)
-        x = self._x_sat0 = _rest(self._sat_in, x)
+        x = self._x_sat0 = _rest(self._asym_in, _rest(self._sat_in, x))
         x = _rest(self._map_in, x)
         x = self._v_prev = _rest(self._map_hyst, _rest(self._hyst, x))
         y = _rest(self._lin, x if self._split else c)
@@ -124,7 +126,7 @@ class FittedChain:
             return ActuatorSamples(np.zeros(0), np.zeros(0))
         applied = self._amp.run(c)
         x = applied
-        for st in (self._delay, self._sat_in):
+        for st in (self._delay, self._sat_in, self._asym_in):
             x = x if st is None else st.run(x)
         x_sat = x
         for st in (self._map_in, self._hyst, self._map_hyst):

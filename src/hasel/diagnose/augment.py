@@ -72,6 +72,7 @@ from scipy import optimize, signal
 from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import LinearSim, Prepared, dominant_time_constant_s, flat_extremes
 from hasel.effects.asymmetric import DIRECTIONS, speed_limit  # noqa: F401 - kept importable here
+from hasel.effects.asymmetric import INPUT as ASYM_INPUT
 from hasel.effects.asymmetric import lag as _asym_lag
 from hasel.effects.base import LINEAR, SLOT_ORDER, EffectFit
 from hasel.effects.delay import delay_max as _delay_max
@@ -254,6 +255,11 @@ class Pipeline:
         elif f is not None and f.variant.startswith("input"):
             key += ("si", f.variant) + f.theta
             x = _clip(x, f)
+        f = e.get("asymmetric_dynamics")
+        if f is not None and f.variant == ASYM_INPUT:  # the lag of the voltage itself (what a drift then sees)
+            key += ("ai",) + f.theta
+            x = self._memo(("x", ri) + key, lambda x=x, f=f: _asym_lag(x, self.prep.dt_s, f.theta, self.u_c,
+                                                                          self.u_s))
         out["x_sat"] = x
         f = e.get("static_nonlinearity")
         if f is not None and f.variant.split(":")[0] == "input":  # the polynomial or the dead band
@@ -292,7 +298,7 @@ class Pipeline:
             y = y + self.unit(sim).run(self.y_s * poly_map(f.theta, w))
         out["y_int"] = y
         f = e.get("asymmetric_dynamics")
-        if f is not None:
+        if f is not None and f.variant != ASYM_INPUT:
             # a state-dependent recursion: kept for the fits that hold it fixed (of the stages after it)
             key += ("a", f.variant) + f.theta
             y = self._memo(("ya", ri) + key, lambda y=y, f=f: self._asym(y, f))

@@ -84,7 +84,8 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                        + (f", the log starting on the {'rising' if fit.theta[-1] < 0 else 'falling'} branch "
                           f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
-                                f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the output "
+                                f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the "
+                                + ("input (before the dynamics) " if fit.variant == "input" else "output ")
                                 + (f"cannot move faster than {fit.theta[0]:.4g}{_rate_unit(units[1])} while "
                                    f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
                                    if fit.variant.startswith("rate_limit") else

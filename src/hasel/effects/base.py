@@ -46,11 +46,12 @@ SLOTS = ("input", "dynamics", "output")
 #: Name of the pseudo-effect holding a re-identified linear model (not an effect: never named).
 LINEAR = "_linear"
 #: Position of each ``name:variant-side`` in the diagnosis's chain (the generic forms' order):
-#: delay, input clip or slew limit, input map, hysteresis, map after the hysteresis (offered only beside an
-#: accepted hysteresis: ``static_nonlinearity:after_hysteresis``, 3.5), linear model with load, internal map,
+#: delay, input clip or slew limit, input lag (``asymmetric_dynamics:input``), input map, hysteresis, map after
+#: the hysteresis (offered only beside an accepted hysteresis: ``static_nonlinearity:after_hysteresis``, 3.5),
+#: linear model with load, internal map,
 #: asymmetric lag or speed limit, drift, output clip, sensor map, measured clip.
 SLOT_ORDER = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "saturation:slew": 1,
-              "static_nonlinearity:input": 2, "hysteresis": 3,
+              "asymmetric_dynamics:input": 1.5, "static_nonlinearity:input": 2, "hysteresis": 3,
               "static_nonlinearity:after_hysteresis": 3.5, "load_mass": 4, "static_nonlinearity:internal": 5,
               "asymmetric_dynamics": 6, "charge_drift": 7, "saturation:output": 8, "sensor_nonlinearity": 9,
               "saturation:measured": 10}
