@@ -94,7 +94,11 @@ def closest_unnamed(rounds: list[dict]) -> dict | None:
     forward = [r for r in rounds if "candidates" in r and "accepted" in r]
     for i in range(len(forward) - 1, -1, -1):
         r = forward[i]
-        if r["accepted"] or not r.get("failed"):
+        if r["accepted"]:
+            # a refusal before an accepted round was superseded (a round-1 map refused alone, then
+            # accepted with a second effect)
+            return None
+        if not r.get("failed"):
             continue
         before = next((set(p["best"].split(" + ")) for p in reversed(forward[:i]) if p["accepted"]), set())
         new = [n for n in str(r["best"]).split(" + ") if n not in before]
