@@ -282,7 +282,8 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     for rd in v.rounds:
         md.append(f"- round {rd['round']}: best {rd.get('best')} "
                   f"({'accepted' if rd.get('accepted') else 'rejected'}; removes {100 * rd.get('gain', 0):.1f} % "
-                  f"of the validation residual, z {rd.get('z', 0):.1f})")
+                  f"of the validation residual, z {rd.get('z', 0):.1f})"
+                  + ("; refused for its slow part alone, its pairs tried next" if rd.get("retried_as_pairs") else ""))
         md += [f"    - {c['name']}: {c['nrmse_validation']:.4f}" for c in rd["candidates"][:8]]
     md += ["", "## Fitted parameters", ""]
     for e in v.effects:
