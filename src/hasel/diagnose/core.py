@@ -669,7 +669,7 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
         ok, gain = _acceptance(ctx, st, rnd, results, best)
         if st.pending_evidence is not None:
             st.rounds[-1]["frequency_evidence"], st.pending_evidence = st.pending_evidence, None
-        if not ok and rnd == 0 and opts.pair_pool > 1 and _only_slow(st.rounds[-1]):
+        if not ok and rnd == 0 and opts.pair_pool > 1 and _only_slow(st.rounds[-1], opts):
             # a map refused only because the fast part does not gain may be a map beside a second effect
             # that sets the fast part's gain (a hysteresis narrowing small swings): its pairs get the test
             ctx.say("  the map gains in the slow part only: its pairs with the other effects are tried")
@@ -686,9 +686,11 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
         _swap_stage(ctx, st, best[2])
 
 
-def _only_slow(record: dict) -> bool:
-    """Whether a round's record was refused by the slow-part gate alone (see :func:`failed_gates`)."""
-    return [g["gate"] for g in record.get("failed", [])] == ["slow_only"]
+def _only_slow(record: dict, opts: DiagnoseOptions) -> bool:
+    """Whether a round's record was refused by the slow-part gate alone: it passed the held-out test (which
+    :func:`failed_gates` does not list beside the slow-part gate) and failed nothing else."""
+    passed_held_out = record.get("t_block", -math.inf) >= opts.t_min or record.get("z_coloured", -math.inf) >= opts.zc_min
+    return [g["gate"] for g in record.get("failed", [])] == ["slow_only"] and passed_held_out
 
 
 def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:
