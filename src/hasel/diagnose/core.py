@@ -669,10 +669,28 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
         ok, gain = _acceptance(ctx, st, rnd, results, best)
         if st.pending_evidence is not None:
             st.rounds[-1]["frequency_evidence"], st.pending_evidence = st.pending_evidence, None
+        if not ok and rnd == 0 and opts.pair_pool > 1 and _only_slow(st.rounds[-1], opts):
+            # a map refused only because the fast part does not gain may be a map beside a second effect
+            # that sets the fast part's gain (a hysteresis narrowing small swings): its pairs get the test
+            ctx.say("  the map gains in the slow part only: its pairs with the other effects are tried")
+            st.rounds[-1]["retried_as_pairs"] = True
+            pairs = [r for r in _pair_candidates(ctx, st, singles, list(results)) if len(r[6]) - (LINEAR in r[6]) >= 2]
+            pairs = [r for r in pairs if not linear_static(ctx.pipe, r[6])]
+            if pairs:
+                best = _pick(pairs)
+                ok, gain = _acceptance(ctx, st, rnd, pairs, best)
+                results = pairs
         if not ok:
             break
         _adopt_candidate(ctx, st, results, best, gain)
         _swap_stage(ctx, st, best[2])
+
+
+def _only_slow(record: dict, opts: DiagnoseOptions) -> bool:
+    """Whether a round's record was refused by the slow-part gate alone: it passed the held-out test (which
+    :func:`failed_gates` does not list beside the slow-part gate) and failed nothing else."""
+    passed_held_out = record.get("t_block", -math.inf) >= opts.t_min or record.get("z_coloured", -math.inf) >= opts.zc_min
+    return [g["gate"] for g in record.get("failed", [])] == ["slow_only"] and passed_held_out
 
 
 def _timing_fold(ctx: _Context, st: _State, timing: dict) -> set[str]:

@@ -94,7 +94,11 @@ def closest_unnamed(rounds: list[dict]) -> dict | None:
     forward = [r for r in rounds if "candidates" in r and "accepted" in r]
     for i in range(len(forward) - 1, -1, -1):
         r = forward[i]
-        if r["accepted"] or not r.get("failed"):
+        if r["accepted"]:
+            # a refusal before an accepted round was superseded (a round-1 map refused alone, then
+            # accepted with a second effect)
+            return None
+        if not r.get("failed"):
             continue
         before = next((set(p["best"].split(" + ")) for p in reversed(forward[:i]) if p["accepted"]), set())
         new = [n for n in str(r["best"]).split(" + ") if n not in before]
@@ -278,7 +282,8 @@ def write_report(v, directory: str | os.PathLike[str], units: tuple[str, str] = 
     for rd in v.rounds:
         md.append(f"- round {rd['round']}: best {rd.get('best')} "
                   f"({'accepted' if rd.get('accepted') else 'rejected'}; removes {100 * rd.get('gain', 0):.1f} % "
-                  f"of the validation residual, z {rd.get('z', 0):.1f})")
+                  f"of the validation residual, z {rd.get('z', 0):.1f})"
+                  + ("; refused for its slow part alone, its pairs tried next" if rd.get("retried_as_pairs") else ""))
         md += [f"    - {c['name']}: {c['nrmse_validation']:.4f}" for c in rd["candidates"][:8]]
     md += ["", "## Fitted parameters", ""]
     for e in v.effects:
