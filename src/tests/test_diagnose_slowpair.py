@@ -10,6 +10,9 @@ default threads agree.)
 """
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 
 from hasel import paper
@@ -17,7 +20,10 @@ from hasel.diagnose import DiagnoseOptions, diagnose
 from hasel.diagnose.core import _only_slow
 from hasel.diagnose.report import closest_unnamed
 from hasel.plant import amplifier_filter_tf
-from verify import gen
+
+# the first corpus's generator is a script folder (bench/verify), not an installed package
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench" / "verify"))
+import gen  # noqa: E402
 
 RATE_HZ = 500.0
 EFFECTS = [("hysteresis", "asym_pi", {"radii": [0.05, 0.2, 0.4], "weights": [0.3, 0.4, 0.3], "up_scale": 2.0}),
