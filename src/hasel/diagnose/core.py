@@ -637,7 +637,11 @@ def _swap_stage(ctx: _Context, st: _State, name: str) -> None:
 
 
 def _forward_selection(ctx: _Context, st: _State) -> None:
-    """Stage: rounds of candidate fits; the best is added while it passes :func:`_acceptance`."""
+    """Stage: rounds of candidate fits; the best is added while it passes :func:`_acceptance`.
+
+    Where round 1's best, a map, passed the held-out test but was refused for its slow part alone (its fast part
+    did not gain: a wander's signature, or a second effect setting the fast part's gain), the pairs are fitted in
+    round 1 as well and the best pair faces the same acceptance."""
     opts = ctx.opts
     singles: list[Candidate] = []
     for rnd in range(opts.max_effects):

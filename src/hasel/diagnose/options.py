@@ -314,7 +314,9 @@ class Verdict:
         its acceptance test read (``gain``, ``gap_share``, ``nominal_gap_share``, ``t_block``, ``z_coloured``,
         ``delta_bic``, ``over_floor``, ``t_block_fast``, ``slow_only``), ``accepted`` and, when refused,
         ``failed``: the gates it failed, each ``gate`` (a key) and ``why`` (words with the figures;
-        :func:`hasel.diagnose.core.failed_gates`); later records are the checks' (``backward_check``, ...).
+        :func:`hasel.diagnose.core.failed_gates`); ``retried_as_pairs`` on a round-1 map refused for its slow
+        part alone, whose pairs were then tested in round 1 (the next record, also round 1); later records are
+        the checks' (``backward_check``, ...).
     export : dict of ndarray
         ``t_s``, ``measured``, ``nominal``, ``augmented`` over the final held-out samples.
     notes : list of dict
