@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from hasel.diagnose.augment import EffectFit, Pipeline
+from hasel.effects.asymmetric import INPUT as ASYM_INPUT
 from hasel.effects.load import load_offset
 from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 
@@ -85,7 +86,7 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                           f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "
                                 f"{dr['rising_minus_falling']:+.3g}) but fades at slow rates: the "
-                                + ("input (before the dynamics) " if fit.variant == "input" else "output ")
+                                + ("input (before the dynamics) " if fit.variant == ASYM_INPUT else "output ")
                                 + (f"cannot move faster than {fit.theta[0]:.4g}{_rate_unit(units[1])} while "
                                    f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
                                    if fit.variant.startswith("rate_limit") else
