@@ -568,7 +568,7 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
                  big_enough: bool, nominal_share: float, over_floor: float, first: bool, t_blk: float, z_col: float,
                  slow_only: bool, t_fast: float, dbic: float) -> list[dict]:
     """The acceptance gates a round's best candidate failed (:func:`_acceptance`: accepted when there is none), each as ``gate`` (a key:
-    ``gain``, ``gap_share``, ``nominal_share``, ``held_out``, ``slow_only``, ``bic``) and ``why`` (one line in
+    ``gain``, ``gap_share``, ``nominal_share``, ``near_floor``, ``held_out``, ``slow_only``, ``bic``) and ``why`` (one line in
     words, with the figures and what each gate needs). Shares are fractions of the validation residual energy;
     ``over_floor`` is that energy over the noise floor's."""
     out = []
@@ -585,6 +585,12 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
             + ("" if first else f", or what is left {opts.relevant_over_floor:g} x the floor's energy: here "
                                 f"{over_floor:.3g} x") + "): a remainder this small beside the named effects is "
             "as often their forms' misfit as another effect")})
+    if first and not over_floor >= opts.first_over_floor_min:
+        out.append({"gate": "near_floor", "why": (
+            f"the nominal model's validation error is {over_floor:.3g} x the noise floor's energy (a first effect "
+            f"needs {opts.first_over_floor_min:g} x): a gap this close to the floor is as often the sensor's "
+            "quantisation, a floor estimated low or the log's own discretisation as physics; a larger excitation "
+            "where the effect acts, or a quieter sensor, would decide")})
     if slow_only:
         out.append({"gate": "slow_only", "why": (
             f"a map whose gain is in the slow part of the residual only (fast-part block score {t_fast:.1f}, a map "
