@@ -39,6 +39,9 @@ def test_each_gate_is_reported_with_its_figures():
     assert _gates(t_blk=2.8, z_col=14.4) == []           # either held-out figure passes
     assert _gates(t_blk=7.0, z_col=-0.5, slow_only=True, t_fast=-0.2) == ["slow_only"]
     assert _gates(dbic=10.0) == ["bic"]
+    assert _gates(first=True, over_floor=1.22) == ["near_floor"]   # a first effect this close to the floor
+    assert _gates(first=False, over_floor=1.22) == []              # a later one is judged on its share
+    assert _gates(first=True, over_floor=2.0) == []
     why = failed_gates(OPTS, **(PASS | dict(big_enough=False, nominal_share=0.0008, over_floor=4.96)))[0]["why"]
     assert "0.08 % of the nominal model's gap (needs 3 %" in why and "here 4.96 x" in why
     why = failed_gates(OPTS, **(PASS | dict(t_blk=2.76, z_col=1.3)))[0]["why"]
