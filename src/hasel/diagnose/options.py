@@ -71,7 +71,8 @@ class DiagnoseOptions:
         [free]: without it a sensor map fitted to closed-loop wander scored 3.6.
     false_alarm_note : str
         The measured false-alarm rate of the test, copied into every verdict: on the effect-free
-        tuning logs (none) and on effect-free logs no threshold was set on (8 of 114, session 28).
+        tuning logs and on effect-free logs no choice had seen (6 of 370, session 29; 8 of 114 in
+        session 28, before ``first_over_floor_min``).
     alike_share : float
         Two explanations are reported as ambiguous when the other one removes at least this
         share of what the chosen one removes and the block test does not prefer the chosen
@@ -263,12 +264,14 @@ class DiagnoseOptions:
     alike_share: float = 0.9
     wander_s: float = 0.0
     false_alarm_note: str = ("an effect is named only if it passes a held-out test whose thresholds were set on "
-                             "effect-free logs (bench/tune_diag: 151 logs of many designs; white, coloured and "
-                             "quantised noise, sensor wander; 200 Hz-5 kHz; ZOH, FOH, centred, fractional offsets: "
-                             "none named there). On effect-free logs no threshold was set on, it names an effect on "
-                             "8 of 114 (7 %, 95 % upper bound 12 %: two unseen seeds of that generator 5 of 72, two "
-                             "independent verification corpora 2 of 20 and 1 of 22; measured in session 28), above "
-                             "the 5 % target: a single named effect with a small shrink on a log like these may be noise")
+                             "effect-free logs (bench/tune_diag: many designs; white, coloured and quantised noise, "
+                             "sensor wander; 100 Hz-10 kHz; ZOH, FOH, centred, fractional offsets). On effect-free "
+                             "logs no choice had seen it names an effect on 6 of 370 (1.6 %, 95 % upper bound 3.5 %: "
+                             "ten fresh seeds of that generator 6 of 360, fresh multi2 and forms3 seeds 0 of 10; "
+                             "session 29), and on the independent verification corpora on 2 of 20 and 1 of 22. "
+                             "Those named: a quantised stroke or voltage read as a static map or a load, a random walk "
+                             "as a drift, closed-loop sensor noise as a hysteresis; a single named effect with a "
+                             "small shrink on a log like these may be noise")
     asym_ratio_min: float = 2.0
     top_k: int = 8
     pair_pool: int = 5
