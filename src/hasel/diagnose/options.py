@@ -147,8 +147,10 @@ class DiagnoseOptions:
         generator ``multi2.py`` named a load on its 5 kHz effect-free paper chirp (1.4 x) in
         three seeds: there the gap is the sensor's or the simulator's discretisation, which
         passes a held-out test as well as physics does. Cost on the tuning logs: a clip of the
-        highest 0.5-2 % of the commands (``cases.py`` voltage_clip_high, 1.08 x) is no longer named;
-        it is reported as the closest unnamed candidate with this gate's reason.
+        highest 0.5-2 % of the commands (``cases.py`` voltage_clip_high, 1.08 x) is no longer named.
+        The refused round stays in the verdict's ``rounds`` (JSON and report) with this gate's
+        reason; the text summary names a closest unnamed candidate only where more than twice the
+        floor is left (``report.LEFT_OVER_FLOOR``).
     stop_share, stop_over_floor : float
         No further round once what is left above the floor is below ``stop_share`` of the
         nominal gap *and* the validation error is within ``stop_over_floor`` times the
