@@ -66,7 +66,7 @@ def _repeat_check(ctx: _Context, st: _State, where: dict) -> None:
     _, m_ho, e_trial = ctx.scores(trial)
     t_blk, z_col = ctx.held_out(st.e_ho, e_trial)
     ok = (share >= opts.repeat_share_min and z_rep >= opts.z_min and m_ho <= opts.repeat_mse_ratio * st.mse_ho
-          and (t_blk >= opts.t_min or z_col >= opts.zc_min))
+          and opts.held_out_passes(t_blk, z_col))
     _direct_check(ctx, st, "repeat_check", "charge_drift", trial, ok,
                   {"period_s": rp["period_s"], "repeat_change_share_explained": share, "z": z_rep,
                    "t_block": t_blk, "z_coloured": z_col},
@@ -427,7 +427,7 @@ def _heavier_restart(ctx: _Context, st: _State, rest: dict[str, EffectFit], m_ho
     t_blk, z_col = ctx.held_out(e_r, best[1][2])
     info = {"near_db_without": mag["near_db_without"], "near_db_with": mag["near_db_with"],
             "restart_gain": gain, "t_block": t_blk, "z_coloured": z_col}
-    if gain >= opts.min_next_gain and (t_blk >= opts.t_min or z_col >= opts.zc_min):
+    if gain >= opts.min_next_gain and opts.held_out_passes(t_blk, z_col):
         return best[0], best[1], info
     ctx.say(f"  restarted heavier it removes {100 * gain:.1f} % (block score {t_blk:.1f}, coloured z {z_col:.1f}): "
             f"not kept")
@@ -489,7 +489,7 @@ def _backward_check(ctx: _Context, st: _State) -> None:
             refit, m_tr_r, m_ho_r, e_r = _refit_rest(ctx, rest)
             gain = _gain_without(st, m_ho_r)
             t_blk, z_col = ctx.held_out(e_r, st.e_ho)
-            ok = gain >= opts.min_next_gain and (t_blk >= opts.t_min or z_col >= opts.zc_min)
+            ok = gain >= opts.min_next_gain and opts.held_out_passes(t_blk, z_col)
             _backward_round(ctx, st, name, refit, m_ho_r, ok, t_block=t_blk, z_coloured=z_col)
             ctx.say(f"backward check: {name} given the others refitted removes {100 * gain:.1f} % (held-out block "
                     f"score {t_blk:.1f}, coloured-noise z {z_col:.1f}) -> {'kept' if ok else 'fails'}")

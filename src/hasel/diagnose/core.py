@@ -521,7 +521,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all) or (
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
-    held_out_ok = t_blk >= opts.t_min or z_col >= opts.zc_min
+    held_out_ok = opts.held_out_passes(t_blk, z_col)
     new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
     # a map (static or sensor) says the output error depends on the level; slow sensor wander depends on time,
     # and where the level changes slowly with time (offsets stepped in turn, a warm-up) a map fits the wander,
@@ -596,7 +596,7 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
             f"a map whose gain is in the slow part of the residual only (fast-part block score {t_fast:.1f}, a map "
             f"needs {opts.map_fast_t_min:g}): a slow sensor offset wander or a drift gives that too; levels "
             "visited in another order, or a rest at zero between them, separate a map from a wander")})
-    elif not (t_blk >= opts.t_min or z_col >= opts.zc_min):
+    elif not opts.held_out_passes(t_blk, z_col):
         out.append({"gate": "held_out", "why": (
             f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
             f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
@@ -651,9 +651,9 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
     opts = ctx.opts
     singles: list[Candidate] = []
     for rnd in range(opts.max_effects):
-        # the first round runs even at the floor: an effect that shows in a few places only (a clip of
-        # the highest commands, a step's transient) leaves the whole log's NRMSE at the floor, and the
-        # acceptance test (the coloured-noise z) credits it where it shows
+        # the first round's candidates are fitted even at the floor (an effect that shows in a few places
+        # only, a clip of the highest commands, leaves the whole log's NRMSE there) and recorded; within
+        # first_over_floor_min of the floor the acceptance refuses them (its near_floor gate)
         if rnd > 0 and ctx.to_nrmse(st.mse_ho) <= opts.floor_margin * ctx.floor_va:
             ctx.say("at the noise floor: no further effect")
             break
@@ -699,7 +699,7 @@ def _forward_selection(ctx: _Context, st: _State) -> None:
 def _only_slow(record: dict, opts: DiagnoseOptions) -> bool:
     """Whether a round's record was refused by the slow-part gate alone: it passed the held-out test (which
     :func:`failed_gates` does not list beside the slow-part gate) and failed nothing else."""
-    passed_held_out = record.get("t_block", -math.inf) >= opts.t_min or record.get("z_coloured", -math.inf) >= opts.zc_min
+    passed_held_out = opts.held_out_passes(record.get("t_block", -math.inf), record.get("z_coloured", -math.inf))
     return [g["gate"] for g in record.get("failed", [])] == ["slow_only"] and passed_held_out
 
 

@@ -307,6 +307,11 @@ class DiagnoseOptions:
     progress: Callable[[str], None] | None = None
     map_fast_t_min: float = 1.0
 
+    def held_out_passes(self, t_block: float, z_coloured: float) -> bool:
+        """The held-out test: the block score reaches ``t_min`` or the coloured-noise z reaches ``zc_min``
+        (a NaN figure passes neither)."""
+        return t_block >= self.t_min or z_coloured >= self.zc_min
+
 
 @dataclass
 class Verdict:
