@@ -42,6 +42,11 @@ def test_each_gate_is_reported_with_its_figures():
     assert _gates(first=True, over_floor=1.22) == ["near_floor"]   # a first effect this close to the floor
     assert _gates(first=False, over_floor=1.22) == []              # a later one is judged on its share
     assert _gates(first=True, over_floor=2.0) == []
+    assert _gates(first=True, gap_nrmse=0.0008) == ["practical_size"]   # a first effect of a recorder's size
+    assert _gates(first=False, gap_nrmse=0.0008) == []                  # a later one: the gap is the nominal's
+    assert _gates(first=True, gap_nrmse=0.003) == []
+    why = failed_gates(OPTS, **(PASS | dict(first=True, gap_nrmse=0.00084)))[0]["why"]
+    assert "0.084 % of the output's spread" in why and "needs 0.3 %" in why
     why = failed_gates(OPTS, **(PASS | dict(big_enough=False, nominal_share=0.0008, over_floor=4.96)))[0]["why"]
     assert "0.08 % of the nominal model's gap (needs 3 %" in why and "here 4.96 x" in why
     why = failed_gates(OPTS, **(PASS | dict(t_blk=2.76, z_col=1.3)))[0]["why"]

@@ -544,15 +544,18 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # a later effect there needs the later rounds' share (min_next_gain), not the floor-side min_gap_share
     far = rnd > 0 and over_floor >= opts.relevant_over_floor
     # the acceptance is the absence of a failed gate: one place decides it and says why
+    gap_nrmse = ctx.to_nrmse(st.mse_nom - sigma2)  # the nominal model's systematic validation error
     failed = failed_gates(opts, gain=gain, need=need, gap_share=gap_share,
                           gap_need=need if far else opts.min_gap_share, big_enough=big_enough,
                           nominal_share=nominal_share, over_floor=over_floor, first=rnd == 0,
-                          t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic)
+                          t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic,
+                          gap_nrmse=gap_nrmse)
     ok = not failed
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
-                          "over_floor": over_floor, "t_block_fast": t_fast, "slow_only": bool(slow_only),
+                          "over_floor": over_floor, "nominal_gap_nrmse": gap_nrmse, "t_block_fast": t_fast,
+                          "slow_only": bool(slow_only),
                           "accepted": bool(ok)}
                          | ({"magnitude_evidence": magnitude} if magnitude is not None else {})
                          | ({"failed": failed} if failed else {}))
@@ -560,17 +563,19 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g}"
             + (f", fast-part block score {t_fast:.1f} (a map needs {opts.map_fast_t_min:g}: slow co-variation only)"
-               if slow_only else "") + f" -> {'accepted' if ok else 'rejected'}")
+               if slow_only else "") + f" -> {'accepted' if ok else 'rejected'}"
+            + ("" if ok else f" ({', '.join(g['gate'] for g in failed)})"))
     return ok, gain
 
 
 def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: float, gap_need: float,
                  big_enough: bool, nominal_share: float, over_floor: float, first: bool, t_blk: float, z_col: float,
-                 slow_only: bool, t_fast: float, dbic: float) -> list[dict]:
+                 slow_only: bool, t_fast: float, dbic: float, gap_nrmse: float = math.inf) -> list[dict]:
     """The acceptance gates a round's best candidate failed (:func:`_acceptance`: accepted when there is none), each as ``gate`` (a key:
-    ``gain``, ``gap_share``, ``nominal_share``, ``near_floor``, ``held_out``, ``slow_only``, ``bic``) and ``why`` (one line in
-    words, with the figures and what each gate needs). Shares are fractions of the validation residual energy;
-    ``over_floor`` is that energy over the noise floor's."""
+    ``gain``, ``gap_share``, ``nominal_share``, ``near_floor``, ``practical_size``, ``held_out``, ``slow_only``, ``bic``) and
+    ``why`` (one line in words, with the figures and what each gate needs). Shares are fractions of the validation
+    residual energy; ``over_floor`` is that energy over the noise floor's; ``gap_nrmse`` is the systematic part of the
+    validation error (its energy above the floor's) as an NRMSE."""
     out = []
     # each gate is the negation of its pass condition, so a NaN figure fails it
     if not gain >= need:
@@ -591,6 +596,12 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
             f"needs {opts.first_over_floor_min:g} x): a gap this close to the floor is as often the sensor's "
             "quantisation, a floor estimated low or the log's own discretisation as physics; a larger excitation "
             "where the effect acts, or a quieter sensor, would decide")})
+    if first and not gap_nrmse >= opts.min_gap_nrmse:
+        out.append({"gate": "practical_size", "why": (
+            f"the nominal model's systematic error is {100 * gap_nrmse:.2g} % of the output's spread (a first effect "
+            f"needs {100 * opts.min_gap_nrmse:g} %): recorders' own calibration and quantisation (0.05-0.1 % of full "
+            "scale) make errors this small; a calibrated voltage and stroke record, or a larger excitation where the "
+            "effect acts, would decide")})
     if slow_only:
         out.append({"gate": "slow_only", "why": (
             f"a map whose gain is in the slow part of the residual only (fast-part block score {t_fast:.1f}, a map "
