@@ -63,7 +63,7 @@ def test_closest_unnamed_is_the_newcomer_of_the_last_refused_round():
               _round(2, "static_nonlinearity + load_mass", False, ["not confirmed"], gain=0.27),
               {"round": 3, "backward_check": True, "best": "static_nonlinearity", "accepted": True}]
     c = closest_unnamed(rounds)
-    assert c == {"name": "load_mass", "round": 2, "gain": 0.27, "why": ["not confirmed"]}
+    assert c == {"name": "load_mass", "round": 2, "gain": 0.27, "why": ["not confirmed"], "gates": ["held_out"]}
     assert closest_unnamed(rounds[:1]) is None           # no refused round: stopped at the floor or max_effects
     assert closest_unnamed([_round(1, "hysteresis", False, ["x"])])["name"] == "hysteresis"
 
@@ -89,6 +89,21 @@ def test_the_summary_names_the_closest_unnamed_only_when_a_gap_is_left():
                              "coloured); closest unnamed: load_mass") for ln in verdict_lines(low))
     near = 0.9 * LEFT_OVER_FLOOR * 0.0083
     assert not any(ln.startswith("left unexplained") for ln in verdict_lines(_verdict(0.38, near, 0.0083, eff, rounds)))
+
+
+def test_a_first_effect_refused_for_its_size_alone_is_reported_however_close_to_the_floor():
+    def refused(*gates):
+        return [{"round": 1, "candidates": [{"name": "static_nonlinearity"}], "best": "static_nonlinearity",
+                 "gain": 0.67, "accepted": False, "failed": [{"gate": g, "why": f"{g} why"} for g in gates]}]
+    seen = [ln for ln in verdict_lines(_verdict(0.0011, 0.0011, 0.0006, [], refused("practical_size")))
+            if ln.startswith("seen, too small")]
+    assert seen == ["seen, too small to name: static_nonlinearity (removes 67 % of the validation error): "
+                    "practical_size why"]
+    both = verdict_lines(_verdict(0.0011, 0.0011, 0.0008, [], refused("near_floor", "practical_size")))
+    assert any(ln.endswith("near_floor why; practical_size why") for ln in both)
+    # refused by a held-out test too: not "seen", and 1.4 x the floor is too close to say what came closest
+    other = verdict_lines(_verdict(0.0011, 0.0011, 0.0008, [], refused("practical_size", "held_out")))
+    assert not any(ln.startswith(("seen, too small", "left unexplained")) for ln in other)
 
 
 def test_a_refused_small_load_beside_a_map_is_reported_with_its_gate(tmp_path):

@@ -149,8 +149,9 @@ class DiagnoseOptions:
         passes a held-out test as well as physics does. Cost on the tuning logs: a clip of the
         highest 0.5-2 % of the commands (``cases.py`` voltage_clip_high, 1.08 x) is no longer named.
         The refused round stays in the verdict's ``rounds`` (JSON and report) with this gate's
-        reason; the text summary names a closest unnamed candidate only where more than twice the
-        floor is left (``report.LEFT_OVER_FLOOR``).
+        reason; where it failed only this gate and ``min_gap_nrmse`` the text summary says what was
+        seen ("seen, too small to name"), otherwise it names a closest unnamed candidate only where
+        more than twice the floor is left (``report.LEFT_OVER_FLOOR``).
     min_gap_nrmse : float
         The first effect is named only where the nominal model's systematic validation error
         (the root of its validation MSE less the floor's variance, as an NRMSE: a fraction of the
@@ -162,7 +163,8 @@ class DiagnoseOptions:
         gaps of 0.0002-0.0029 (a 10-bit recorded voltage on held steps named a static map, voltage
         noise on a PRBS a static map, quantised strokes a load or a map); the smallest true first
         effect of the tuning sets has 0.0062. The refused round is reported with the gate
-        ``practical_size``.
+        ``practical_size`` (and in the text summary as "seen, too small to name" when no other gate
+        refused it).
     stop_share, stop_over_floor : float
         No further round once what is left above the floor is below ``stop_share`` of the
         nominal gap *and* the validation error is within ``stop_over_floor`` times the

@@ -60,7 +60,12 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
         lines.append(f"{i}. {e['name']} (NRMSE after {e['nrmse_after']:.4f}): {e['evidence']}")
     left = h["nrmse_augmented"] / floor if floor > 0 else float("inf")
     closest = closest_unnamed(getattr(v, "rounds", []) or [])
-    if closest is not None and test.get("max_effects") != 0 and left > LEFT_OVER_FLOOR:
+    small = closest is not None and not v.effects and set(closest["gates"]) <= SIZE_GATES
+    if small:
+        # a first effect that passed every test but the size gates: say so, however close to the floor
+        lines.append(f"seen, too small to name: {closest['name']} (removes {_share(closest['gain'])} of the validation "
+                     "error): " + "; ".join(closest["why"]))
+    elif closest is not None and test.get("max_effects") != 0 and left > LEFT_OVER_FLOOR:
         # a gap well above the floor is left: say which explanation came closest and which test it failed
         low = list((getattr(v, "noise", {}) or {}).get("trust_notes", []) or [])
         lines.append(f"left unexplained: {left:.3g} x the noise floor"
@@ -81,6 +86,9 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
     return lines
 
 
+#: The gates that refuse a first effect for its size alone (``DiagnoseOptions.first_over_floor_min``, ``min_gap_nrmse``).
+SIZE_GATES = frozenset({"near_floor", "practical_size"})
+
 #: Held-out NRMSE over the noise floor's NRMSE above which the text summary says what came closest to explaining
 #: the rest (below it the remainder is within what the floor's estimate itself may be off by).
 LEFT_OVER_FLOOR = 2.0
@@ -89,8 +97,8 @@ LEFT_OVER_FLOOR = 2.0
 def closest_unnamed(rounds: list[dict]) -> dict | None:
     """The best candidate of the last forward round that failed acceptance, from a verdict's ``rounds``: ``name``
     (the newcomer's family or families beside what the round started from), ``round``, ``gain`` (share of the
-    validation residual energy it removed) and ``why`` (the failed gates in words); None when no forward round
-    failed (selection stopped at the floor or at ``max_effects``)."""
+    validation residual energy it removed), ``why`` (the failed gates in words) and ``gates`` (their keys); None when
+    no forward round failed (selection stopped at the floor or at ``max_effects``)."""
     forward = [r for r in rounds if "candidates" in r and "accepted" in r]
     for i in range(len(forward) - 1, -1, -1):
         r = forward[i]
@@ -103,7 +111,7 @@ def closest_unnamed(rounds: list[dict]) -> dict | None:
         before = next((set(p["best"].split(" + ")) for p in reversed(forward[:i]) if p["accepted"]), set())
         new = [n for n in str(r["best"]).split(" + ") if n not in before]
         return {"name": " + ".join(new) or str(r["best"]), "round": int(r["round"]), "gain": float(r["gain"]),
-                "why": [g["why"] for g in r["failed"]]}
+                "why": [g["why"] for g in r["failed"]], "gates": [g["gate"] for g in r["failed"]]}
     return None
 
 
