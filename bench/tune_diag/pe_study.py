@@ -2,10 +2,11 @@
 
 The whitening filter A(q) is an AR(p) fitted (least squares) to the round's old validation residual within its
 blocks; both residuals are filtered by it within each block, then the block score is taken. Prints per log: names,
-round-1 best, t_blk, z_col, t_white (and the same with p=2)."""
+round-1 best, t_blk, z_col, t_w10 (both residuals whitened by the old one's AR) and t_pe10 (each by its own AR: the
+score of ``h-pe.patch``). ``TREE`` (environment) names the source tree, default this repository."""
 import sys, json, os
 import numpy as np
-TREE = os.environ.get("TREE", "/work/wt/main30a")
+TREE = os.environ.get("TREE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
 sys.path.insert(0, TREE + "/src")
 from hasel.diagnose import core, pool
 from hasel.diagnose import context as cx
