@@ -48,7 +48,7 @@ def held_out(self, e_old, e_new):
             res[f"a{p}sum"] = float(np.sum(a))
             b = ar_fit(e_new, lab, p)
             res[f"t_pe{p}"] = block_test(whiten(e_old, lab, a), whiten(e_new, lab, b), lab, 0)
-        except Exception as err:
+        except Exception:  # a failed fit is a missing figure in a study
             res[f"t_w{p}"] = float("nan")
     REC.append(res)
     return t, z
