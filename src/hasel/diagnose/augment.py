@@ -84,7 +84,8 @@ from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonline
                                   monomial, monomials, poly_map, rate_grid, sumsq)
 from hasel.effects.hysteresis import HYST_THRESHOLDS
 from hasel.effects.hysteresis import branch as _branch
-from hasel.effects.load import LOAD_SAG_MIN_MU, damping_factor, keeps_zeta, load_offset, loaded_den, mode_of  # noqa: F401
+from hasel.effects.load import (LOAD_SAG_MIN_MU, apply_zero_form, damping_factor, keeps_zeta, load_offset,  # noqa: F401
+                               loaded_den, mode_of, zero_form)
 from hasel.effects.operators import play
 from hasel.effects.registry import FAMILIES as _REGISTRY
 from hasel.effects.saturation import clip as _clip
@@ -108,10 +109,11 @@ _SLOT = SLOT_ORDER
 
 def _load_form(f: "EffectFit | None") -> tuple:
     """The arguments of :meth:`Pipeline.loaded` for the load fit ``f`` (None: no load): mass ratio, gain
-    factor, damping ratio kept, damping factor (or None) and added mode ``(Hz, damping ratio)`` (or None)."""
+    factor, damping ratio kept, damping factor (or None), added mode ``(Hz, damping ratio)`` (or None) and the
+    numerator's change (:func:`hasel.effects.load.zero_form`, or None)."""
     if f is None:
-        return 0.0, 1.0, False, None, None
-    return float(f.theta[0]), float(f.theta[1]), keeps_zeta(f), damping_factor(f), mode_of(f)
+        return 0.0, 1.0, False, None, None, None
+    return float(f.theta[0]), float(f.theta[1]), keeps_zeta(f), damping_factor(f), mode_of(f), zero_form(f)
 
 
 @dataclass
@@ -179,24 +181,26 @@ class Pipeline:
     # -- linear model with load --------------------------------------------------------------
     def loaded(self, mu: float, kappa: float = 1.0, lin: "EffectFit | None" = None,
                zeta_kept: bool = False, damping: float | None = None,
-               mode: tuple[float, float] | None = None) -> LinearSim:
+               mode: tuple[float, float] | None = None, zeros: tuple | None = None) -> LinearSim:
         """The model (``lin``, a re-identified linear part, or the nominal) with ``1 + mu`` times
         the inertia of its resonances (``zeta_kept``: their frequency lowered, damping ratio kept;
         ``damping``: their frequency over ``sqrt(1 + mu)`` and their damping ratio times ``damping``;
-        ``mode``: an added pole pair (Hz, damping ratio); :func:`hasel.effects.load.loaded_den`) (cached),
-        times the gain ``kappa``."""
+        ``mode``: an added pole pair (Hz, damping ratio); :func:`hasel.effects.load.loaded_den`; ``zeros``: the
+        zero pairs moved or a pole-zero pair added, :func:`hasel.effects.load.apply_zero_form`) (cached), times the
+        gain ``kappa``."""
         base = ("nominal",) if lin is None else lin.theta
         if damping is not None and damping == 1.0 and mu == 0.0:
             damping = None
         key = (round(mu, 12), bool(zeta_kept) and mu != 0.0,
-               None if damping is None else round(float(damping), 12), mode) + base
+               None if damping is None else round(float(damping), 12), mode, zeros) + base
         sim = self._lin.get(key)
         if sim is None:
             num, den = (self.num, self.den) if lin is None else split_linear(lin)
-            if mu == 0.0 and damping is None and mode is None:
+            if mu == 0.0 and damping is None and mode is None and zeros is None:
                 sim = self.nominal if lin is None else self.prep.sim(num, den)
             else:
-                sim = self.prep.sim(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping, mode=mode))
+                sim = self.prep.sim(*apply_zero_form(num, loaded_den(den, mu, zeta_kept=zeta_kept, damping=damping,
+                                                                     mode=mode), zeros))
             if len(self._lin) > 64:
                 self._lin.clear()
             self._lin[key] = sim
@@ -206,8 +210,8 @@ class Pipeline:
 
     def linear_of(self, effects: dict[str, "EffectFit"]) -> "LinearSim | _Scaled":
         """The linear part of the chain for ``effects`` (re-identified model and load included)."""
-        mu, kappa, zk, dk, md = _load_form(effects.get("load_mass"))
-        return self.loaded(mu, kappa, effects.get(LINEAR), zk, dk, md)
+        mu, kappa, zk, dk, md, zf = _load_form(effects.get("load_mass"))
+        return self.loaded(mu, kappa, effects.get(LINEAR), zk, dk, md, zf)
 
     # -- stages ---------------------------------------------------------------------------------
     def _memo(self, key: tuple, fn):
@@ -282,10 +286,10 @@ class Pipeline:
             x = apply_input(f, x, self.u_c, self.u_s)
         out["x_eff"] = x
         f = e.get("load_mass")
-        mu, kappa, zk, dk, md = _load_form(f)
+        mu, kappa, zk, dk, md, zf = _load_form(f)
         lin = e.get(LINEAR)
-        key += ("l", mu, kappa, zk, dk, md) + (lin.theta if lin is not None else ())
-        sim = self.loaded(mu, kappa, lin, zk, dk, md)
+        key += ("l", mu, kappa, zk, dk, md, zf) + (lin.theta if lin is not None else ())
+        sim = self.loaded(mu, kappa, lin, zk, dk, md, zf)
         y = self._memo(("y", ri) + key, lambda: sim.run(x))
         if f is not None and "sag" in f.variant.split(":"):  # the load's weight: a static offset (a sag)
             key += ("sag", load_offset(f))

@@ -27,7 +27,21 @@ Forms
   where it acts (from a fifth of its frequency up) moved, rose below it and is explained by it
   (:func:`mode_evidence`): a delay moves no magnitude, a lag only lowers it.
 
-All transform the linear model with :func:`loaded_den`; the load acts in the
+- generic ``model:notch`` (``theta = (mu, kappa, zero_factor, zero_damping_ratio)``): the model's complex zero
+  pairs (its anti-resonance: the counter-motion of a mount) moved, ``s^2 + 2 z w s + w^2`` becoming
+  ``(s^2 + 2 zn (k w) s + (k w)^2) / k^2`` (static gain kept), ``k`` :data:`NOTCH_K_MIN`-:data:`NOTCH_K_MAX`,
+  ``zn`` up to :data:`NOTCH_ZETA_MAX`; fitted with ``mu`` held at 0;
+- generic ``model:pair`` (``theta = (mu, kappa, pair_hz, pair_damping_ratio, zero_over_pole,
+  zero_damping_ratio)``): an added lightly damped pole-zero pair below the resonance (a payload swinging on
+  its mount), P(s) times ``(wp/wz)^2 (s^2 + 2 zz wz s + wz^2) / (s^2 + 2 zp wp s + wp^2)`` (static gain kept),
+  ``wp = 2 pi pair_hz`` :data:`PAIR_RATIO_MIN`-:data:`PAIR_RATIO_MAX` times the resonance, ``wz / wp``
+  :data:`PAIR_ZP_MIN`-:data:`PAIR_ZP_MAX`, both damping ratios :data:`PAIR_ZETA_MIN`-:data:`PAIR_ZETA_MAX`
+  (a lightly damped pair moves the magnitude up and down within an octave; a lag or a delay does not);
+  fitted with ``mu`` held at 0.
+  Both are taken in place of the forms above only when they lower the training BIC by their extra parameters
+  and the magnitude where they act moved and is explained by them (:func:`zero_evidence`).
+
+All transform the linear model with :func:`loaded_den` (and :func:`zero_form` on the numerator); the load acts in the
 ``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
 a load moves the magnitude near the resonance (and the phase with it), a delay only the
 phase, linearly in frequency.
@@ -47,6 +61,7 @@ from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
 
 __all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "mode_of", "mode_evidence", "load_offset",
+           "zero_form", "apply_zero_form", "zero_evidence",
            "LinearStage",
            "LoadFamily", "FAMILY", "resonance_signature", "DAMP_MIN", "DAMP_MAX"]
 
@@ -84,6 +99,27 @@ MODE_MIN_DB = 0.3
 MODE_RISE_BELOW = 0.7
 #: Whether the diagnosis tries the ``model:mode`` form.
 MODE_FORM = True
+#: Range of the ``model:notch`` form's factor on the zero pairs' frequency, and the largest damping ratio of the
+#: moved pair (a mount's anti-resonance moved by a load: ``bench/tune_diag/forms3.py``'s ``antires``, 0.62-1.5 and
+#: 0.03-0.25; beyond 2x the pair leaves a band that is excited up to 1-2x the resonance).
+NOTCH_K_MIN, NOTCH_K_MAX = 0.5, 2.0
+NOTCH_ZETA_MAX = 0.5
+#: Starting factors and damping ratios of the ``model:notch`` form's grid.
+NOTCH_GRID = (0.7, 0.85, 1.2, 1.4)
+NOTCH_ZETA_GRID = (0.05, 0.15)
+#: Range of the ``model:pair`` form's pole frequency over the model's resonance (below it: an added pole pair above
+#: is the ``model:mode`` form), of its zero's frequency over its pole's, and of both damping ratios (lightly damped:
+#: a heavily damped pair is a lag's shape). ``forms3.py``'s ``lowmode``: 3-12 Hz (0.15-0.6 of P's 19.4 Hz), zero over
+#: pole 0.7-0.88 or 1.15-1.4, damping ratios 0.03-0.15.
+PAIR_RATIO_MIN, PAIR_RATIO_MAX = 0.1, 1.0
+PAIR_ZP_MIN, PAIR_ZP_MAX = 0.6, 1.6
+PAIR_ZETA_MIN, PAIR_ZETA_MAX = 0.01, 0.3
+#: Starting pole frequencies (over the resonance) and zero-over-pole ratios of the ``model:pair`` form's grid.
+PAIR_GRID = (0.15, 0.25, 0.4, 0.6, 0.85)
+PAIR_ZP_GRID = (0.8, 1.25)
+#: Whether the diagnosis tries the ``model:notch`` and ``model:pair`` forms.
+NOTCH_FORM = True
+PAIR_FORM = True
 
 
 @dataclass(frozen=True)
@@ -147,6 +183,46 @@ def damping_factor(fit: EffectFit) -> float | None:
 def mode_of(fit: EffectFit) -> tuple[float, float] | None:
     """The added mode ``(f_hz, zeta)`` (Hz, dimensionless) of a ``model:mode[:sag]`` load fit, else None."""
     return (float(fit.theta[2]), float(fit.theta[3])) if "mode" in fit.variant.split(":") else None
+
+
+def zero_form(fit: EffectFit | None) -> tuple | None:
+    """The numerator-changing part of a load fit: ``("notch", zero_factor, zero_damping_ratio)`` for
+    ``model:notch[:sag]``, ``("pair", pair_hz, pair_damping_ratio, zero_over_pole, zero_damping_ratio)`` for
+    ``model:pair[:sag]`` (Hz and dimensionless), else None."""
+    if fit is None:
+        return None
+    parts = fit.variant.split(":")
+    if "notch" in parts:
+        return ("notch", float(fit.theta[2]), float(fit.theta[3]))
+    if "pair" in parts:
+        return ("pair",) + tuple(float(v) for v in fit.theta[2:6])
+    return None
+
+
+def apply_zero_form(num: np.ndarray, den: np.ndarray, form: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+    """``num/den`` (descending powers of s) with :func:`zero_form`'s change, the static gain kept: ``"notch"``
+    maps each complex zero pair ``s^2 + 2 z w s + w^2`` to ``(s^2 + 2 zn (k w) s + (k w)^2) / k^2``; ``"pair"``
+    multiplies the numerator by ``s^2 / wz^2 + 2 zz s / wz + 1`` and the denominator by ``s^2 / wp^2 + 2 zp s / wp
+    + 1``."""
+    num, den = np.asarray(num, float), np.asarray(den, float)
+    if form is None:
+        return num, den
+    if form[0] == "notch":
+        k, zn = float(form[1]), float(form[2])
+        num2 = map_resonances(num, lambda r: (1.0 / (k * k), 2.0 * zn * abs(r) / k, abs(r) ** 2))
+        # the factorisation's rounding: the static gain exactly kept
+        if num[-1] != 0.0 and num2[-1] != 0.0:
+            num2 = num2 * (num[-1] / num2[-1])
+        return num2, den
+    wp = 2.0 * math.pi * float(form[1])
+    wz = wp * float(form[3])
+    return (np.polymul(num, [1.0 / (wz * wz), 2.0 * float(form[4]) / wz, 1.0]),
+            np.polymul(den, [1.0 / (wp * wp), 2.0 * float(form[2]) / wp, 1.0]))
+
+
+def antiresonance_hz(num) -> float:
+    """Natural frequency (Hz) of the lowest complex zero pair of ``num`` (nan without one)."""
+    return resonance_hz(num) if np.asarray(num).size >= 3 else float("nan")
 
 
 def load_offset(fit: EffectFit) -> float:
@@ -366,21 +442,30 @@ def _mode_shown(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit)
 def _refine_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit, max_nfev: int = 30) -> EffectFit:
     """``fit`` (``model:mode``) refined by bounded least squares on the training residual over ``kappa``, the
     mode's frequency and damping ratio, the mass ratio held (at 0: the model's own resonances kept)."""
+    th = np.asarray(fit.theta, float)
+    return _refine_held(pipe, effects, fit, np.array([0.1, 0.1 * max(th[2], 1e-6), 0.05]), max_nfev)
+
+
+def _refine_held(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit, x_scale: np.ndarray,
+                 max_nfev: int = 30) -> EffectFit:
+    """``fit`` refined by bounded least squares on the training residual over all its parameters but the mass
+    ratio (held: the model's own resonances kept), ``x_scale`` their typical steps; ``fit`` when the refinement
+    fails or does not lower the training sum of squares."""
     from scipy import optimize
 
     lo, hi = FAMILY.bounds(pipe, fit)
     th0 = np.asarray(fit.theta, float)
 
     def full(x: np.ndarray) -> EffectFit:
-        return EffectFit("load_mass", fit.variant, (float(th0[0]), float(x[0]), float(x[1]), float(x[2])))
+        return EffectFit("load_mass", fit.variant, (float(th0[0]),) + tuple(float(v) for v in x))
 
     def fun(x: np.ndarray) -> np.ndarray:
         return pipe.residuals(_with(effects, full(x)), "train")
 
-    x0 = np.clip(th0[1:4], lo[1:4], hi[1:4])
+    x0 = np.clip(th0[1:], lo[1:], hi[1:])
     try:
-        res = optimize.least_squares(fun, x0, bounds=(lo[1:4], hi[1:4]), method="trf", max_nfev=max_nfev,
-                                     x_scale=np.array([0.1, 0.1 * x0[1], 0.05]), diff_step=1e-3)
+        res = optimize.least_squares(fun, x0, bounds=(lo[1:], hi[1:]), method="trf", max_nfev=max_nfev,
+                                     x_scale=x_scale, diff_step=1e-3)
     except (ValueError, np.linalg.LinAlgError):
         return fit
     cand = full(res.x)
@@ -421,6 +506,94 @@ def _fit_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     return fit
 
 
+def _band_of(fit: EffectFit, pipe: FitContext) -> tuple[float, float]:
+    """Where a ``model:notch`` / ``model:pair`` ``fit`` moves the response (Hz): from half the lower to twice the
+    higher of its old and new zero frequencies (notch), of its pole and zero frequencies (pair)."""
+    zf = zero_form(fit)
+    if zf is None:
+        return float("nan"), float("nan")
+    if zf[0] == "notch":
+        f0 = antiresonance_hz(getattr(pipe, "num", np.zeros(0)))
+        lo_f, hi_f = f0 * min(1.0, zf[1]), f0 * max(1.0, zf[1])
+    else:
+        lo_f, hi_f = zf[1] * min(1.0, zf[3]), zf[1] * max(1.0, zf[3])
+    return lo_f / 2.0, 2.0 * hi_f
+
+
+def zero_evidence(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> dict:
+    """Whether the measured-over-model magnitude where a ``model:notch`` / ``model:pair`` ``fit`` acts shows it
+    beside ``effects``: over the coherent bins of :func:`hasel.effects.evidence.response_ratio` within
+    :func:`_band_of` (at least four), the median absolute magnitude change (dB) without the load is at least
+    :data:`MODE_MIN_DB` and the model with ``fit`` leaves at most half of it (a delay moves no magnitude; the
+    same rule as :func:`mode_evidence`'s, without its rise: a pair may lift or lower the response).
+
+    Returns ``{"band_hz", "n_bins", "db_without", "db_with", "shown"}``."""
+    from hasel.effects.evidence import response_ratio
+
+    lo_f, hi_f = _band_of(fit, pipe)
+
+    def med_db(eff: dict[str, EffectFit]) -> tuple[float, int]:
+        f, r = response_ratio(pipe, eff)
+        m = (f >= lo_f) & (f <= hi_f)
+        if m.sum() < 4:
+            return float("nan"), int(m.sum())
+        return float(np.median(np.abs(_db(r[m])))), int(m.sum())
+
+    a, n = med_db(effects) if math.isfinite(lo_f) else (float("nan"), 0)
+    b = med_db(_with(effects, fit))[0] if n >= 4 else float("nan")
+    shown = bool(np.isfinite(a) and np.isfinite(b) and a >= MODE_MIN_DB and b <= 0.5 * a)
+    return {"band_hz": [lo_f, hi_f], "n_bins": n, "db_without": a, "db_with": b, "shown": shown}
+
+
+def _take_richer(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit, rich: EffectFit) -> EffectFit:
+    """``rich`` in place of ``fit`` when its extra parameters (at least one) lower the training BIC (noise
+    variance unknown) and :func:`zero_evidence` shows it; else ``fit``."""
+    n = pipe.residuals(_with(effects, fit), "train").size
+    s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, rich))
+    if bic_prefers(n, s0, s1, max(1, len(rich.theta) - len(fit.theta))) and zero_evidence(pipe, effects, rich)["shown"]:
+        return rich
+    return fit
+
+
+def _fit_notch(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
+    """The ``model:notch`` form (the model's zero pairs moved, ``mu`` 0) in place of ``fit`` when it lowers the
+    training BIC and :func:`zero_evidence` shows it; a grid of :data:`NOTCH_GRID` x :data:`NOTCH_ZETA_GRID` with
+    ``kappa`` by least squares, the best start refined."""
+    starts = [_kappa_ls(pipe, effects, "model:notch", (0.0,), (k, z)) for k in NOTCH_GRID for z in NOTCH_ZETA_GRID]
+    costs = [_sse(pipe, _with(effects, f)) for f in starts]
+    best = _refine_held(pipe, effects, starts[int(np.argmin(costs))], np.array([0.1, 0.1, 0.05]))
+    return _take_richer(pipe, effects, fit, best)
+
+
+def _fit_pair(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
+    """The ``model:pair`` form (an added pole-zero pair below the resonance, ``mu`` 0) in place of ``fit`` when it
+    lowers the training BIC and :func:`zero_evidence` shows it; a grid of :data:`PAIR_GRID` x :data:`PAIR_ZP_GRID`
+    (damping ratios 0.08) with ``kappa`` by least squares, the best start refined. Tried only where the
+    measured-over-model magnitude moves below the resonance (:func:`_moved_below`)."""
+    fres = resonance_hz(pipe.den)
+    if not _moved_below(pipe, effects, fres):
+        return fit
+    starts = [_kappa_ls(pipe, effects, "model:pair", (0.0,), (fres * r, 0.08, q, 0.08))
+              for r in PAIR_GRID for q in PAIR_ZP_GRID]
+    costs = [_sse(pipe, _with(effects, f)) for f in starts]
+    f0 = starts[int(np.argmin(costs))]
+    best = _refine_held(pipe, effects, f0, np.array([0.1, 0.1 * f0.theta[2], 0.03, 0.1, 0.03]))
+    return _take_richer(pipe, effects, fit, best)
+
+
+def _moved_below(pipe: FitContext, effects: dict[str, EffectFit], fres: float) -> bool:
+    """A cheap screen before the ``model:pair`` fit: the upper quartile of the measured-over-model absolute
+    magnitude change (dB) over the coherent bins from :data:`PAIR_RATIO_MIN` / 2 to :data:`PAIR_RATIO_MAX` x
+    :data:`PAIR_ZP_MAX` x 2 times the resonance ``fres`` (Hz) at least :data:`MODE_MIN_DB` (at least four bins)."""
+    from hasel.effects.evidence import response_ratio
+
+    f, r = response_ratio(pipe, effects)
+    m = (f >= PAIR_RATIO_MIN * fres / 2.0) & (f <= 2.0 * PAIR_RATIO_MAX * PAIR_ZP_MAX * fres)
+    if m.sum() < 4:
+        return False
+    return float(np.quantile(np.abs(_db(r[m])), 0.75)) >= MODE_MIN_DB
+
+
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best: dict[str, tuple[float, EffectFit]] = {}
     # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; each form's
@@ -444,6 +617,10 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         fit = _fit_damp(pipe, effects, fit)
     if MODE_FORM and _has_resonance(pipe):
         fit = _fit_mode(pipe, effects, fit)
+    if NOTCH_FORM and math.isfinite(antiresonance_hz(getattr(pipe, "num", np.zeros(0)))):
+        fit = _fit_notch(pipe, effects, fit)
+    if PAIR_FORM and _has_resonance(pipe):
+        fit = _fit_pair(pipe, effects, fit)
     # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
     # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
     # kept when it lowers the training BIC (one more parameter, noise variance unknown)
@@ -471,24 +648,29 @@ class LoadFamily(EffectFamily):
                         "resonance's magnitude in proportion to the mass, another change of the dynamics does not")
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
-        """``("mass_ratio", "gain_factor"[, "damping_factor" | "mode_hz", "mode_damping_ratio"][, "offset"])``."""
+        """``("mass_ratio", "gain_factor"[, "damping_factor" | "mode_hz", "mode_damping_ratio" | "zero_factor",
+        "zero_damping_ratio" | "pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"][, "offset"])``."""
+        zf = zero_form(fit)
         return (("mass_ratio", "gain_factor") + (("damping_factor",) if damping_factor(fit) is not None else ())
                 + (("mode_hz", "mode_damping_ratio") if mode_of(fit) is not None else ())
+                + (() if zf is None else ("zero_factor", "zero_damping_ratio") if zf[0] == "notch" else
+                   ("pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"))
                 + (("offset",) if "sag" in fit.variant.split(":") else ()))
 
     def transform(self, num, den, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """The linear model ``num/den`` with the load: heavier (or otherwise damped) resonances, an added mode,
         gain ``kappa``."""
         mu, kappa = fit.theta[:2]
-        return np.asarray(num, float) * kappa, loaded_den(den, mu, zeta_kept=keeps_zeta(fit),
-                                                          damping=damping_factor(fit), mode=mode_of(fit))
+        num2, den2 = apply_zero_form(num, loaded_den(den, mu, zeta_kept=keeps_zeta(fit), damping=damping_factor(fit),
+                                                     mode=mode_of(fit)), zero_form(fit))
+        return num2 * kappa, den2
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LinearStage:
         """The loaded linear model ``scales.num/den`` (the nominal) with its gain and sag."""
         num, den = getattr(scales, "num"), getattr(scales, "den")
-        return LinearStage(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit), damping=damping_factor(fit),
-                                           mode=mode_of(fit)),
-                           dt_s, gain=fit.theta[1], offset=load_offset(fit))
+        num2, den2 = apply_zero_form(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit),
+                                                     damping=damping_factor(fit), mode=mode_of(fit)), zero_form(fit))
+        return LinearStage(num2, den2, dt_s, gain=fit.theta[1], offset=load_offset(fit))
 
     def truth_stage(self, effect: Effect, dt_s: float) -> SagStage:
         """The sag (the heavier resonances are :meth:`LoadMass.loaded_den` of the plant's model)."""
@@ -503,7 +685,9 @@ class LoadFamily(EffectFamily):
         """``-0.8 <= mu <= 10`` (damping-ratio-kept and damping forms: ``mu <= ZETA_MU_MAX``),
         ``0.05 <= kappa <= 20``, ``DAMP_MIN <= delta <= DAMP_MAX``, the added mode's frequency (Hz) within
         ``MODE_RATIO_MIN``-``MODE_RATIO_MAX`` times the model's resonance (of its slowest pole without one) and its
-        damping ratio within ``MODE_ZETA_MIN``-``MODE_ZETA_MAX``, ``sag <= 0``."""
+        damping ratio within ``MODE_ZETA_MIN``-``MODE_ZETA_MAX``, the moved zero pairs' factor and damping ratio
+        (``NOTCH_*``), the added pair's pole frequency (Hz), damping ratios and zero-over-pole ratio (``PAIR_*``),
+        ``sag <= 0``."""
         damp = damping_factor(fit) is not None
         hi_mu = ZETA_MU_MAX if keeps_zeta(fit) or damp else 10.0
         lo, hi = [-0.8, 0.05], [hi_mu, 20.0]
@@ -517,6 +701,14 @@ class LoadFamily(EffectFamily):
                 fres = float(np.min(np.abs(np.roots(den)))) / (2.0 * math.pi)
             lo += [MODE_RATIO_MIN * fres, MODE_ZETA_MIN]
             hi += [MODE_RATIO_MAX * fres, MODE_ZETA_MAX]
+        zf = zero_form(fit)
+        if zf is not None and zf[0] == "notch":
+            lo += [NOTCH_K_MIN, 0.0]
+            hi += [NOTCH_K_MAX, NOTCH_ZETA_MAX]
+        elif zf is not None:
+            fres = resonance_hz(np.asarray(getattr(ctx, "den"), float))
+            lo += [PAIR_RATIO_MIN * fres, PAIR_ZETA_MIN, PAIR_ZP_MIN, PAIR_ZETA_MIN]
+            hi += [PAIR_RATIO_MAX * fres, PAIR_ZETA_MAX, PAIR_ZP_MAX, PAIR_ZETA_MAX]
         if "sag" in fit.variant.split(":"):
             lo.append(-np.inf)
             hi.append(0.0)
@@ -537,6 +729,14 @@ class LoadFamily(EffectFamily):
                                                       "an added mode: a pole pair of frequency mode_hz and damping "
                                                       "ratio mode_damping_ratio above the resonance, static gain kept"
                                                       if mode_of(fit) is not None else
+                                                      "the anti-resonance moved: the model's zero pairs' frequency "
+                                                      "times zero_factor, damping ratio zero_damping_ratio, static "
+                                                      "gain kept"
+                                                      if (zero_form(fit) or ("",))[0] == "notch" else
+                                                      "an added pole-zero pair below the resonance (a payload "
+                                                      "swinging on its mount): poles at pair_hz, zeros at "
+                                                      "zero_over_pole x pair_hz, static gain kept"
+                                                      if zero_form(fit) is not None else
                                                       "resonances' inertia: frequency and damping ratio fall together"),
                      "mass_ratio": th[0], "gain_factor": th[1],
                      "resonance_factor": 1.0 / math.sqrt(1.0 + th[0]) if th[0] > -1 else float("nan")}
@@ -557,6 +757,14 @@ class LoadFamily(EffectFamily):
             den = getattr(ctx, "den", None)
             fres = resonance_hz(den) if den is not None else float("nan")
             out["mode_over_resonance"] = md[0] / fres if math.isfinite(fres) else float("nan")
+        zf = zero_form(fit)
+        if zf is not None and zf[0] == "notch":
+            out["zero_factor"], out["zero_damping_ratio"] = zf[1], zf[2]
+            f0 = antiresonance_hz(getattr(ctx, "num", np.zeros(0)))
+            out["antiresonance_model_hz"], out["antiresonance_loaded_hz"] = f0, f0 * zf[1]
+        elif zf is not None:
+            out["pair_hz"], out["pair_damping_ratio"], out["zero_over_pole"], out["zero_damping_ratio"] = zf[1:]
+            out["pair_zero_hz"] = zf[1] * zf[3]
         if "sag" in fit.variant.split(":"):
             out["offset"] = load_offset(fit)
             out["offset_unit"] = units[1]
