@@ -49,7 +49,7 @@ from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import _ls, _sse, _with, bic_prefers, sumsq
-from hasel.effects.heldout import block_labels, block_test
+from hasel.effects.heldout import held_out_prefers
 from hasel.validate import in_range, positive
 
 __all__ = ["ChargeDrift", "DriftStage", "Drift2Stage", "TravelStage", "travel_charge", "TRAVEL", "drift_law", "lowpass_chain", "tau_min", "tau_fast_min",
@@ -507,21 +507,13 @@ def fit_level_forms(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
 
 
 def _held_out_prefers(pipe: FitContext, old: dict[str, EffectFit], new: dict[str, EffectFit]) -> bool:
-    """True when ``new`` predicts the validation samples better than ``old`` by the diagnosis's held-out block test
-    (:func:`hasel.effects.heldout.block_test`, slow part kept: a drift is slow) at the context's ``t_min`` (the
-    diagnosis sets it from ``DiagnoseOptions.t_min``, its acceptance score); True as well where the context has no
-    ``t_min`` or no validation samples (a fit outside a diagnosis).
+    """:func:`hasel.effects.heldout.held_out_prefers` (a drift is slow: the slow part kept).
 
     Why: on a chirp whose frequency rises the swing grows through the log as a level drift's charge does, so the two
     are nearly one regressor on training; there the swing took a level drift's place and the set then failed the
     held-out test (combos.py seed 21 #3, multi2.py #6; study h-travel). The swing is taken only where the held-out
     blocks say it is the better law (forms3.py seed 1 #23, a gain lost per cycle: 0.906 -> 0.025)."""
-    t_min = getattr(pipe, "t_min", None)
-    prep = getattr(pipe, "prep", None)
-    if t_min is None or prep is None or not any(r.valid.any() for r in prep.records):
-        return True
-    labels = block_labels(prep, "valid")
-    return block_test(pipe.residuals(old, "valid"), pipe.residuals(new, "valid"), labels) >= t_min
+    return held_out_prefers(pipe, old, new)
 
 
 #: families whose fit holds the output's level (a constant term): an input map's ``z^0`` through the model's gain, a

@@ -3,13 +3,14 @@
 :func:`block_test` scores a residual's improvement over held-out blocks (a signed-rank test; no noise level
 assumed); :func:`block_labels` cuts a prepared log's validation (or final) samples into those blocks. The diagnosis
 accepts an effect on it (:mod:`hasel.diagnose.significance`); the drift family asks it before its swing form takes
-the level form's place (:func:`hasel.effects.drift._held_out_prefers`).
+the level form's place, the load family before its anti-resonance and pole-zero pair forms take another form's
+(:func:`held_out_prefers`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["block_labels", "block_test", "moving_average"]
+__all__ = ["block_labels", "block_test", "held_out_prefers", "moving_average"]
 
 
 def block_labels(prep, mask: str, min_blocks: int = 40, min_len: int = 5) -> np.ndarray:
@@ -77,3 +78,18 @@ def moving_average(x: np.ndarray, n: int) -> np.ndarray:
     pad = np.concatenate([np.full(n // 2, x[0]), x, np.full(n - n // 2 - 1, x[-1])])
     c = np.cumsum(np.concatenate([[0.0], pad]))
     return (c[n:] - c[:-n]) / n
+
+
+def held_out_prefers(pipe, old: dict, new: dict, score: float | None = None) -> bool:
+    """True when the effects ``new`` predict the validation samples better than ``old`` by :func:`block_test`
+    (slow part kept) at ``score`` (default the context's ``t_min``: the diagnosis sets it from
+    ``DiagnoseOptions.t_min``, its acceptance score); True as well where the context has no ``t_min`` or no
+    validation samples (a fit outside a diagnosis). A family's choice of a richer form on training alone may not generalise (the drift's swing form
+    beside a level drift; a load's pole-zero pair in place of its damping-kept form)."""
+    t_min = getattr(pipe, "t_min", None)
+    prep = getattr(pipe, "prep", None)
+    if t_min is None or prep is None or not any(r.valid.any() for r in prep.records):
+        return True
+    labels = block_labels(prep, "valid")
+    return block_test(pipe.residuals(old, "valid"), pipe.residuals(new, "valid"), labels) >= (
+        t_min if score is None else score)
