@@ -37,7 +37,12 @@ load_mass           model                   inertia of G's resonances (or its sl
                                             ``sqrt(1 + mu)``, damping ratio kept;
                                             ``model:damp``: frequency over
                                             ``sqrt(1 + mu)``, damping ratio times
-                                            ``delta``; ``...:sag``: and a static
+                                            ``delta``; ``model:mode``: an added
+                                            pole pair above the resonance;
+                                            ``model:notch``: the zero pairs (the
+                                            anti-resonance) moved; ``model:pair``: an
+                                            added pole-zero pair below the resonance;
+                                            ``...:sag``: and a static
                                             offset ``<= 0`` (the load's weight)
 asymmetric_dynamics output                  first-order lag, one time constant while
                                             the output rises, another while it falls

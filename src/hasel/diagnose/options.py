@@ -71,9 +71,11 @@ class DiagnoseOptions:
         [free]: without it a sensor map fitted to closed-loop wander scored 3.6.
     false_alarm_note : str
         The measured false-alarm rate of the test, copied into every verdict: on the effect-free
-        tuning logs and on effect-free logs no choice had seen (13 of 730, session 30: free_indep
-        seeds 47-66 on the final code, after ``min_gap_nrmse`` was decided on seeds 37-46, where it
-        named 2 of 360; 6 of 370 in session 29; 8 of 114 in session 28, before ``first_over_floor_min``).
+        tuning logs and on effect-free logs no choice had seen (21 of 1100: session 30's 13 of 730, free_indep
+        seeds 47-66 on its final code, after ``min_gap_nrmse`` was decided on seeds 37-46, where it named 2 of
+        360; session 31's 8 of 370, free_indep seeds 67-76 and fresh multi2 / forms3 seeds, the same names before
+        and after the load's notch and pair forms; 6 of 370 in session 29; 8 of 114 in session 28, before
+        ``first_over_floor_min``).
     alike_share : float
         Two explanations are reported as ambiguous when the other one removes at least this
         share of what the chosen one removes and the block test does not prefer the chosen
@@ -284,10 +286,10 @@ class DiagnoseOptions:
                              "effect-free logs (bench/tune_diag: many designs; white, coloured and quantised noise, "
                              "sensor wander; 100 Hz-10 kHz; ZOH, FOH, centred, fractional offsets) and changes the "
                              "output by at least 0.3 % of its spread. On effect-free logs no choice had seen it names "
-                             "an effect on 13 of 730 (1.8 %, 95 % upper bound 3.0 %: twenty fresh seeds of that "
-                             "generator 13 of 720, fresh multi2 and forms3 seeds 0 of 10; session 30), and on the "
+                             "an effect on 21 of 1100 (1.9 %, 95 % upper bound 2.9 %: thirty fresh seeds of that "
+                             "generator 21 of 1080, fresh multi2 and forms3 seeds 0 of 20; sessions 30-31), and on the "
                              "independent verification corpora on 2 of 20 and 1 of 22. Those named: closed-loop sensor "
-                             "noise (wander, AR(1), random walk) as a hysteresis or a map (9 of the 13), open-loop "
+                             "noise (wander, AR(1), random walk) as a hysteresis or a map (15 of the 21), open-loop "
                              "sensor wander, walk or AR(1) noise as a static map or a drift; a single named effect with a "
                              "small shrink on a log like these may be noise")
     asym_ratio_min: float = 2.0
