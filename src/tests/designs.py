@@ -115,6 +115,15 @@ def multisine_through(plant, seed: int, rate_hz: float = 500.0, delay_s: float =
     return t, u, y, {"num": num.tolist(), "den": den.tolist()}
 
 
+def chunked_gap(make_stage, u: np.ndarray, cut: int) -> float:
+    """Largest difference between one stage run on ``u`` whole and a second run in two chunks split at ``cut``
+    (both built by ``make_stage()``, reset at ``u[0]``): zero when the stage carries its state between chunks."""
+    a, b = make_stage(), make_stage()
+    a.reset(u[0])
+    b.reset(u[0])
+    return float(np.max(np.abs(a.run(u) - np.concatenate([b.run(u[:cut]), b.run(u[cut:])]))))
+
+
 def cosine_chirp(rate_hz: float = 500.0, dur_s: float = 20.0) -> np.ndarray:
     """Raised-cosine log chirp 0.2-20 Hz between 0 and 7 kV (kV), ``dur_s`` at ``rate_hz`` (a HASEL driven from
     0 kV, as the static-map form tests use)."""

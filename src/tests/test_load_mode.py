@@ -64,12 +64,7 @@ def test_the_mode_form_is_the_truths_plant_and_runs_in_chunks():
         num, den = num0, den0
 
     u = 4.0 + np.sin(np.arange(600) / 7.0)
-    a, b = fam.stage(fit, Scales(), 1e-3), fam.stage(fit, Scales(), 1e-3)
-    a.reset(u[0])
-    b.reset(u[0])
-    whole = a.run(u)
-    parts = np.concatenate([b.run(u[:217]), b.run(u[217:])])
-    assert np.max(np.abs(whole - parts)) < 1e-12
+    assert designs.chunked_gap(lambda: fam.stage(fit, Scales(), 1e-3), u, 217) < 1e-12
 
 
 @pytest.mark.parametrize("ratio,zeta,seed,tol", [(1.6, 0.25, 1, 0.05), (2.4, 0.15, 2, 0.10)])

@@ -72,10 +72,7 @@ def test_the_forms_are_the_truths_plants_and_run_in_chunks(variant, theta, truth
         num, den = num0, den0
 
     u = 4.0 + np.sin(np.arange(900) / 9.0)
-    a, b = fam.stage(fit, Scales(), 2e-3), fam.stage(fit, Scales(), 2e-3)
-    a.reset(u[0])
-    b.reset(u[0])
-    assert np.max(np.abs(a.run(u) - np.concatenate([b.run(u[:311]), b.run(u[311:])]))) < 1e-12
+    assert designs.chunked_gap(lambda: fam.stage(fit, Scales(), 2e-3), u, 311) < 1e-12
 
 
 def test_the_bounds_follow_the_model():
