@@ -84,8 +84,9 @@ def held_out_prefers(pipe, old: dict, new: dict, score: float | None = None) -> 
     """True when the effects ``new`` predict the validation samples better than ``old`` by :func:`block_test`
     (slow part kept) at ``score`` (default the context's ``t_min``: the diagnosis sets it from
     ``DiagnoseOptions.t_min``, its acceptance score); True as well where the context has no ``t_min`` or no
-    validation samples (a fit outside a diagnosis). A family's choice of a richer form on training alone may not generalise (the drift's swing form
-    beside a level drift; a load's pole-zero pair in place of its damping-kept form)."""
+    validation samples (a fit outside a diagnosis). A family's choice of a richer form on training alone may not
+    generalise (the drift's swing form beside a level drift; a load's pole-zero pair in place of its damping-kept
+    form)."""
     t_min = getattr(pipe, "t_min", None)
     prep = getattr(pipe, "prep", None)
     if t_min is None or prep is None or not any(r.valid.any() for r in prep.records):

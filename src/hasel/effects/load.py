@@ -38,8 +38,9 @@ Forms
   :data:`PAIR_ZP_MIN`-:data:`PAIR_ZP_MAX`, both damping ratios :data:`PAIR_ZETA_MIN`-:data:`PAIR_ZETA_MAX`
   (a lightly damped pair moves the magnitude up and down within an octave; a lag or a delay does not);
   fitted with ``mu`` held at 0.
-  Both are taken in place of the forms above only when they lower the training BIC by their extra parameters
-  and the magnitude where they act moved and is explained by them (:func:`zero_evidence`).
+  Both are taken in place of the forms above only when they lower the training BIC by their extra parameters,
+  the magnitude where they act moved and is explained by them (:func:`zero_evidence`), and the held-out blocks
+  prefer them (:data:`FORM_SCORE`).
 
 All transform the linear model with :func:`loaded_den` (and :func:`zero_form` on the numerator); the load acts in the
 ``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
@@ -62,7 +63,7 @@ from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
 
 __all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "mode_of", "mode_evidence", "load_offset",
-           "zero_form", "apply_zero_form", "zero_evidence",
+           "zero_form", "apply_zero_form", "loaded_tf", "zero_evidence",
            "LinearStage",
            "LoadFamily", "FAMILY", "resonance_signature", "DAMP_MIN", "DAMP_MAX"]
 
@@ -202,6 +203,13 @@ def zero_form(fit: EffectFit | None) -> tuple | None:
     if "pair" in parts:
         return ("pair",) + tuple(float(v) for v in fit.theta[2:6])
     return None
+
+
+def loaded_tf(num: np.ndarray, den: np.ndarray, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
+    """``num/den`` (descending powers of s) with the load ``fit``'s dynamics (:func:`loaded_den` and
+    :func:`apply_zero_form`), its gain ``kappa`` and sag not applied."""
+    return apply_zero_form(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit), damping=damping_factor(fit),
+                                           mode=mode_of(fit)), zero_form(fit))
 
 
 def apply_zero_form(num: np.ndarray, den: np.ndarray, form: tuple | None) -> tuple[np.ndarray, np.ndarray]:
@@ -483,10 +491,17 @@ def _mode_possible(pipe: FitContext, effects: dict[str, EffectFit], fres: float)
     or above ``MODE_RATIO_MIN / 5`` times the resonance ``fres``, Hz): its upper quartile of the absolute change
     (dB) at least :data:`MODE_MIN_DB` (the upper quartile, not :func:`mode_evidence`'s median: that band is wider
     than a mode's own, a mode's tail moves the top of it only). Without four such bins: False."""
+    return _moved_in(pipe, effects, MODE_RATIO_MIN * fres / 5.0, math.inf)
+
+
+def _moved_in(pipe: FitContext, effects: dict[str, EffectFit], lo_hz: float, hi_hz: float) -> bool:
+    """Whether the upper quartile of the measured-over-model absolute magnitude change (dB; ``effects`` in place)
+    over the coherent bins within ``lo_hz``-``hi_hz`` (Hz; at least four) reaches :data:`MODE_MIN_DB`: the cheap
+    screens before the ``model:mode`` and ``model:pair`` fits (one :func:`hasel.effects.evidence.response_ratio`)."""
     from hasel.effects.evidence import response_ratio
 
     f, r = response_ratio(pipe, effects)
-    m = f >= MODE_RATIO_MIN * fres / 5.0
+    m = (f >= lo_hz) & (f <= hi_hz)
     if m.sum() < 4:
         return False
     return float(np.quantile(np.abs(_db(r[m])), 0.75)) >= MODE_MIN_DB
@@ -566,8 +581,8 @@ def _take_richer(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit
 
 
 def _fit_notch(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
-    """The ``model:notch`` form (the model's zero pairs moved, ``mu`` 0) in place of ``fit`` when it lowers the
-    training BIC and :func:`zero_evidence` shows it; a grid of :data:`NOTCH_GRID` x :data:`NOTCH_ZETA_GRID` with
+    """The ``model:notch`` form (the model's zero pairs moved, ``mu`` 0) in place of ``fit`` on
+    :func:`_take_richer`'s three conditions; a grid of :data:`NOTCH_GRID` x :data:`NOTCH_ZETA_GRID` with
     ``kappa`` by least squares, the best start refined."""
     starts = [_kappa_ls(pipe, effects, "model:notch", (0.0,), (k, z)) for k in NOTCH_GRID for z in NOTCH_ZETA_GRID]
     costs = [_sse(pipe, _with(effects, f)) for f in starts]
@@ -576,12 +591,13 @@ def _fit_notch(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) 
 
 
 def _fit_pair(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
-    """The ``model:pair`` form (an added pole-zero pair below the resonance, ``mu`` 0) in place of ``fit`` when it
-    lowers the training BIC and :func:`zero_evidence` shows it; a grid of :data:`PAIR_GRID` x :data:`PAIR_ZP_GRID`
+    """The ``model:pair`` form (an added pole-zero pair below the resonance, ``mu`` 0) in place of ``fit`` on
+    :func:`_take_richer`'s three conditions; a grid of :data:`PAIR_GRID` x :data:`PAIR_ZP_GRID`
     (damping ratios 0.08) with ``kappa`` by least squares, the best start refined. Tried only where the
-    measured-over-model magnitude moves below the resonance (:func:`_moved_below`)."""
+    measured-over-model magnitude moves from :data:`PAIR_RATIO_MIN` / 2 to 2 x :data:`PAIR_RATIO_MAX` x
+    :data:`PAIR_ZP_MAX` times the resonance (:func:`_moved_in`)."""
     fres = resonance_hz(pipe.den)
-    if not _moved_below(pipe, effects, fres):
+    if not _moved_in(pipe, effects, PAIR_RATIO_MIN * fres / 2.0, 2.0 * PAIR_RATIO_MAX * PAIR_ZP_MAX * fres):
         return fit
     starts = [_kappa_ls(pipe, effects, "model:pair", (0.0,), (fres * r, 0.08, q, 0.08))
               for r in PAIR_GRID for q in PAIR_ZP_GRID]
@@ -589,19 +605,6 @@ def _fit_pair(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     f0 = starts[int(np.argmin(costs))]
     best = _refine_held(pipe, effects, f0, np.array([0.1, 0.1 * f0.theta[2], 0.03, 0.1, 0.03]))
     return _take_richer(pipe, effects, fit, best)
-
-
-def _moved_below(pipe: FitContext, effects: dict[str, EffectFit], fres: float) -> bool:
-    """A cheap screen before the ``model:pair`` fit: the upper quartile of the measured-over-model absolute
-    magnitude change (dB) over the coherent bins from :data:`PAIR_RATIO_MIN` / 2 to :data:`PAIR_RATIO_MAX` x
-    :data:`PAIR_ZP_MAX` x 2 times the resonance ``fres`` (Hz) at least :data:`MODE_MIN_DB` (at least four bins)."""
-    from hasel.effects.evidence import response_ratio
-
-    f, r = response_ratio(pipe, effects)
-    m = (f >= PAIR_RATIO_MIN * fres / 2.0) & (f <= 2.0 * PAIR_RATIO_MAX * PAIR_ZP_MAX * fres)
-    if m.sum() < 4:
-        return False
-    return float(np.quantile(np.abs(_db(r[m])), 0.75)) >= MODE_MIN_DB
 
 
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
@@ -659,7 +662,8 @@ class LoadFamily(EffectFamily):
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("mass_ratio", "gain_factor"[, "damping_factor" | "mode_hz", "mode_damping_ratio" | "zero_factor",
-        "zero_damping_ratio" | "pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"][, "offset"])``."""
+        "zero_damping_ratio" | "pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"]
+        [, "offset"])``."""
         zf = zero_form(fit)
         return (("mass_ratio", "gain_factor") + (("damping_factor",) if damping_factor(fit) is not None else ())
                 + (("mode_hz", "mode_damping_ratio") if mode_of(fit) is not None else ())
@@ -670,17 +674,13 @@ class LoadFamily(EffectFamily):
     def transform(self, num, den, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """The linear model ``num/den`` with the load: heavier (or otherwise damped) resonances, an added mode,
         gain ``kappa``."""
-        mu, kappa = fit.theta[:2]
-        num2, den2 = apply_zero_form(num, loaded_den(den, mu, zeta_kept=keeps_zeta(fit), damping=damping_factor(fit),
-                                                     mode=mode_of(fit)), zero_form(fit))
-        return num2 * kappa, den2
+        num2, den2 = loaded_tf(num, den, fit)
+        return num2 * fit.theta[1], den2
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> LinearStage:
         """The loaded linear model ``scales.num/den`` (the nominal) with its gain and sag."""
         num, den = getattr(scales, "num"), getattr(scales, "den")
-        num2, den2 = apply_zero_form(num, loaded_den(den, fit.theta[0], zeta_kept=keeps_zeta(fit),
-                                                     damping=damping_factor(fit), mode=mode_of(fit)), zero_form(fit))
-        return LinearStage(num2, den2, dt_s, gain=fit.theta[1], offset=load_offset(fit))
+        return LinearStage(*loaded_tf(num, den, fit), dt_s, gain=fit.theta[1], offset=load_offset(fit))
 
     def truth_stage(self, effect: Effect, dt_s: float) -> SagStage:
         """The sag (the heavier resonances are :meth:`LoadMass.loaded_den` of the plant's model)."""
