@@ -365,6 +365,11 @@ def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantMo
     effects if it was), with the nominal model's dead time; the effects are the named ones,
     in chain order, with the scales the diagnosis normalised them by. The data must be in
     the graph's units (kV in, mm out): fitted parameters are not converted.
+
+    A fit the diagnosis kept in its model but did not name (a delay within one sample, folded into the
+    log's timing offset: a sampling convention or a clock offset between the channels, not the actuator's
+    physics) is left out of the simulated chain and listed under ``extra["not_simulated"]`` with its
+    parameters (s) and why: the simulator would otherwise add a logger's convention to every step.
     """
     from hasel.diagnose.augment import split_linear
     from hasel.effects.base import LINEAR
@@ -376,7 +381,13 @@ def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantMo
                              f"and {units[1] or '?'} (name the signals ..._kv and ..._mm)")
     pipe, current = verdict.plots["pipe"], verdict.plots["current"]
     num, den = (split_linear(current[LINEAR]) if LINEAR in current else (pipe.num, pipe.den))
-    fits = sorted((f for n, f in current.items() if n != LINEAR), key=lambda f: f.slot)
+    named = set(verdict.names)
+    fits = sorted((f for n, f in current.items() if n != LINEAR and n in named), key=lambda f: f.slot)
+    left = [{"name": n, "variant": f.variant,
+             "params": dict(zip(FAMILIES[n].param_names(f), map(float, f.theta))),
+             "why": "a timing offset within one sample (the log's sampling convention or a clock offset between "
+                    "its channels), not named by the diagnosis: not the actuator's physics"}
+            for n, f in current.items() if n != LINEAR and n not in named]
     effects = tuple(EffectEntry(f.name, dict(zip(FAMILIES[f.name].param_names(f), map(float, f.theta))),
                                 "fitted", f.variant) for f in fits)
     scales = {"u_c": float(pipe.u_c), "u_s": float(pipe.u_s), "y_c": float(pipe.y_c), "y_s": float(pipe.y_s),
@@ -384,7 +395,10 @@ def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantMo
     model = PlantModel(tuple(map(float, num)), tuple(map(float, den)), float(pipe.delay_s), effects,
                        scales if effects else {},
                        extra={"tool": "hasel diagnose --export-plant",
-                              "heldout": {k: verdict.heldout.get(k) for k in ("nrmse_nominal", "nrmse_augmented")}})
+                              "heldout": {k: verdict.heldout.get(k) for k in ("nrmse_nominal", "nrmse_augmented")},
+                              **({"not_simulated": left,
+                                  "heldout_note": "the held-out NRMSEs are the diagnosis's, with not_simulated in "
+                                                  "its model"} if left else {})})
     return parse_plant(model.to_json(), "(exported)")  # the writer's output must read back
 
 

@@ -196,3 +196,26 @@ def test_diagnose_export_plant_writes_a_file_whose_simulation_closes_the_gap(tmp
 
     nominal, augmented = nrmse(run("nominal")[3], z), nrmse(run(str(out))[3], z)
     assert augmented < nominal / 10, (nominal, augmented)
+
+
+
+def test_an_exported_plant_leaves_the_logs_timing_offset_out(tmp_path):
+    """A delay within one sample that the diagnosis folded into the log's timing offset (not named) is not put
+    into the simulator's chain: the plant file carries the named effects only and lists the delay under
+    ``not_simulated`` with its seconds. The log (``test_load_pair``'s moved anti-resonance, 500 Hz, no timing offset
+    written): the set-up shifts the output by about -0.9 sample and the fitted delay (1.8 ms, +0.9 sample) takes it
+    back, a net offset of 0.02 sample; a simulator given the delay would lag the actuator by 0.9 sample."""
+    import designs
+    from hasel.diagnose import diagnose
+    from hasel.plantfile import export_plant
+    from test_load_pair import _notch_plant
+
+    t, u, y, model = designs.multisine_through(_notch_plant(0.75, 0.12), 13, 500.0, 0.0, 0.004, 16.0)
+    v = diagnose(t, u, y, model=model, units=("kV", "mm"))
+    assert v.names == ["load_mass"]
+    folded = v.timing_offset["delay_fit_within_one_sample_s"]
+    assert 0.5 < folded * 500.0 < 1.0 and abs(v.timing_offset["original_samples"]) < 0.1
+    m = read_plant(export_plant(v, tmp_path / "plant.json"))
+    assert [e.name for e in m.effects] == ["load_mass"]
+    entry = m.extra["not_simulated"][0]
+    assert entry["name"] == "time_delay" and entry["params"]["delay_s"] == pytest.approx(folded, rel=1e-9)

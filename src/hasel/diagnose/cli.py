@@ -188,9 +188,12 @@ def _run(args: argparse.Namespace, say: Progress) -> int:
         _write_atomic(args.json, json.dumps(json_safe(out), indent=2, allow_nan=False) + "\n")
         say(f"wrote {args.json}")
     if getattr(args, "export_plant", None):
-        from hasel.plantfile import export_plant
+        from hasel.plantfile import export_plant, read_plant
 
-        say(f"wrote {export_plant(v, args.export_plant, units)}")
+        path = export_plant(v, args.export_plant, units)
+        left = read_plant(path).extra.get("not_simulated") or []
+        say(f"wrote {path}" + "".join(f" ({e['name']} {', '.join(f'{k} {x:.4g}' for k, x in e['params'].items())} "
+                                      f"left out: a timing offset, not physics)" for e in left))
     if args.export_sim:
         ex = v.export
         rows = np.column_stack([ex["t_s"], ex["measured"], ex["nominal"], ex["augmented"]])
