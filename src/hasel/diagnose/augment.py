@@ -42,6 +42,8 @@ load_mass           model                   inertia of G's resonances (or its sl
                                             ``model:notch``: the zero pairs (the
                                             anti-resonance) moved; ``model:pair``: an
                                             added pole-zero pair below the resonance;
+                                            ``model:real``: the real poles times a
+                                            factor (a viscous load);
                                             ``...:sag``: and a static
                                             offset ``<= 0`` (the load's weight)
 asymmetric_dynamics output                  first-order lag, one time constant while
@@ -191,7 +193,7 @@ class Pipeline:
         the inertia of its resonances (``zeta_kept``: their frequency lowered, damping ratio kept;
         ``damping``: their frequency over ``sqrt(1 + mu)`` and their damping ratio times ``damping``;
         ``mode``: an added pole pair (Hz, damping ratio); :func:`hasel.effects.load.loaded_den`; ``zeros``: the
-        zero pairs moved or a pole-zero pair added, :func:`hasel.effects.load.apply_zero_form`) (cached), times the
+        zero pairs moved, a pole-zero pair added or the real poles scaled, :func:`hasel.effects.load.apply_zero_form`) (cached), times the
         gain ``kappa``."""
         base = ("nominal",) if lin is None else lin.theta
         if damping is not None and damping == 1.0 and mu == 0.0:

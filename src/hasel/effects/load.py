@@ -38,9 +38,14 @@ Forms
   :data:`PAIR_ZP_MIN`-:data:`PAIR_ZP_MAX`, both damping ratios :data:`PAIR_ZETA_MIN`-:data:`PAIR_ZETA_MAX`
   (a lightly damped pair moves the magnitude up and down within an octave; a lag or a delay does not);
   fitted with ``mu`` held at 0.
-  Both are taken in place of the forms above only when they lower the training BIC by their extra parameters,
-  the magnitude where they act moved and is explained by them (:func:`zero_evidence`), and the held-out blocks
-  prefer them (:data:`FORM_SCORE`).
+- generic ``model:real`` (``theta = (mu, kappa, pole_factor)``): the model's real poles times ``pole_factor``
+  (:data:`REAL_K_MIN`-:data:`REAL_K_MAX`), the static gain kept (a viscous load: a damper, a thicker liquid or a
+  softer mount slows the actuator's overdamped modes, ``(s + p)`` becoming ``(s + k p) / k``); its zeros and
+  resonances kept; fitted with ``mu`` held at 0. Without it such a load was fitted as heavier resonances beside a
+  spurious hysteresis (``forms3.py`` seed 1, ``slowpoles``: 10x the noise floor left).
+  These three are taken in place of the forms above only when they lower the training BIC by their extra
+  parameters, the magnitude where they act moved and is explained by them (:func:`zero_evidence`), and the
+  held-out blocks prefer them (:data:`FORM_SCORE`).
 
 All transform the linear model with :func:`loaded_den` (and :func:`zero_form` on the numerator); the load acts in the
 ``dynamics`` slot (:meth:`LoadFamily.transform`). Signature (:func:`resonance_signature`):
@@ -63,7 +68,7 @@ from hasel.effects.operators import map_resonances, scale_resonances
 from hasel.validate import finite, in_range, positive
 
 __all__ = ["LoadMass", "LOAD_SAG_MIN_MU", "loaded_den", "keeps_zeta", "damping_factor", "mode_of", "mode_evidence", "load_offset",
-           "zero_form", "apply_zero_form", "loaded_tf", "zero_evidence",
+           "zero_form", "apply_zero_form", "real_poles", "scale_real_poles", "loaded_tf", "zero_evidence",
            "LinearStage",
            "LoadFamily", "FAMILY", "resonance_signature", "DAMP_MIN", "DAMP_MAX"]
 
@@ -126,6 +131,12 @@ FORM_SCORE = 1.645
 #: Whether the diagnosis tries the ``model:notch`` and ``model:pair`` forms.
 NOTCH_FORM = True
 PAIR_FORM = True
+#: Range of the ``model:real`` form's factor on the model's real poles (a viscous load slows them: ``forms3.py``'s
+#: ``slowpoles``, 0.45-0.75; a lighter or stiffer one may speed them), and its grid of starts.
+REAL_K_MIN, REAL_K_MAX = 0.25, 4.0
+REAL_GRID = (0.4, 0.6, 0.8, 1.25, 1.8)
+#: Whether the diagnosis tries the ``model:real`` form.
+REAL_FORM = True
 
 
 @dataclass(frozen=True)
@@ -192,12 +203,15 @@ def mode_of(fit: EffectFit) -> tuple[float, float] | None:
 
 
 def zero_form(fit: EffectFit | None) -> tuple | None:
-    """The numerator-changing part of a load fit: ``("notch", zero_factor, zero_damping_ratio)`` for
-    ``model:notch[:sag]``, ``("pair", pair_hz, pair_damping_ratio, zero_over_pole, zero_damping_ratio)`` for
-    ``model:pair[:sag]`` (Hz and dimensionless), else None."""
+    """The part of a load fit applied after :func:`loaded_den` (it changes the numerator or the real poles):
+    ``("notch", zero_factor, zero_damping_ratio)`` for ``model:notch[:sag]``, ``("pair", pair_hz,
+    pair_damping_ratio, zero_over_pole, zero_damping_ratio)`` for ``model:pair[:sag]``, ``("real",
+    pole_factor)`` for ``model:real[:sag]`` (Hz and dimensionless), else None."""
     if fit is None:
         return None
     parts = fit.variant.split(":")
+    if "real" in parts:
+        return ("real", float(fit.theta[2]))
     if "notch" in parts:
         return ("notch", float(fit.theta[2]), float(fit.theta[3]))
     if "pair" in parts:
@@ -216,10 +230,13 @@ def apply_zero_form(num: np.ndarray, den: np.ndarray, form: tuple | None) -> tup
     """``num/den`` (descending powers of s) with :func:`zero_form`'s change, the static gain kept: ``"notch"``
     maps each complex zero pair ``s^2 + 2 z w s + w^2`` to ``(s^2 + 2 zn (k w) s + (k w)^2) / k^2``; ``"pair"``
     multiplies the numerator by ``s^2 / wz^2 + 2 zz s / wz + 1`` and the denominator by ``s^2 / wp^2 + 2 zp s / wp
-    + 1``."""
+    + 1``; ``"real"`` multiplies each nonzero real pole by ``pole_factor`` (complex poles, zeros and a pole at 0
+    kept)."""
     num, den = np.asarray(num, float), np.asarray(den, float)
     if form is None:
         return num, den
+    if form[0] == "real":
+        return num, scale_real_poles(den, float(form[1]))
     if form[0] == "notch":
         k, zn = float(form[1]), float(form[2])
         num2 = map_resonances(num, lambda r: (1.0 / (k * k), 2.0 * zn * abs(r) / k, abs(r) ** 2))
@@ -231,6 +248,31 @@ def apply_zero_form(num: np.ndarray, den: np.ndarray, form: tuple | None) -> tup
     wz = wp * float(form[3])
     return (np.polymul(num, [1.0 / (wz * wz), 2.0 * float(form[4]) / wz, 1.0]),
             np.polymul(den, [1.0 / (wp * wp), 2.0 * float(form[2]) / wp, 1.0]))
+
+
+def real_poles(den) -> np.ndarray:
+    """The nonzero real poles of ``den`` (descending powers of s; rad/s, negative for stable ones)."""
+    p = np.roots(np.asarray(den, float))
+    real = (np.abs(p.imag) <= 1e-9 * np.maximum(1.0, np.abs(p))) & (np.abs(p) > 1e-12)
+    return p[real].real
+
+
+def scale_real_poles(den: np.ndarray, k: float) -> np.ndarray:
+    """``den`` (descending powers of s) with each nonzero real pole times ``k`` and ``den(0)`` kept (with a pole at
+    0, its lowest nonzero coefficient: the gain at low frequency)."""
+    den = np.asarray(den, float)
+    if k == 1.0:
+        return den.copy()
+    p = np.roots(den)
+    real = (np.abs(p.imag) <= 1e-9 * np.maximum(1.0, np.abs(p))) & (np.abs(p) > 1e-12)
+    if not np.any(real):
+        return den.copy()
+    p2 = p.copy()
+    p2[real] = p[real].real * k
+    den2 = np.real(np.poly(p2)) * den[0]
+    nz = np.flatnonzero(np.abs(den) > 0)
+    i = int(nz[-1]) if nz.size else den.size - 1  # the lowest-order coefficient (den(0) without an integrator)
+    return den2 * (den[i] / den2[i]) if den2[i] != 0.0 else den2
 
 
 def antiresonance_hz(num) -> float:
@@ -527,12 +569,18 @@ def _fit_mode(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
 
 
 def _band_of(fit: EffectFit, pipe: FitContext) -> tuple[float, float]:
-    """Where a ``model:notch`` / ``model:pair`` ``fit`` moves the response (Hz): from half the lower to twice the
-    higher of its old and new zero frequencies (notch), of its pole and zero frequencies (pair)."""
+    """Where a ``model:notch`` / ``model:pair`` / ``model:real`` ``fit`` moves the response (Hz): from half the lower
+    to twice the higher of its old and new zero frequencies (notch), of its pole and zero frequencies (pair), of the
+    model's real poles' old and new frequencies (real)."""
     zf = zero_form(fit)
     if zf is None:
         return float("nan"), float("nan")
-    if zf[0] == "notch":
+    if zf[0] == "real":
+        w = np.abs(real_poles(getattr(pipe, "den", np.zeros(0)))) / (2.0 * math.pi)
+        if not w.size:
+            return float("nan"), float("nan")
+        lo_f, hi_f = float(w.min()) * min(1.0, zf[1]), float(w.max()) * max(1.0, zf[1])
+    elif zf[0] == "notch":
         f0 = antiresonance_hz(getattr(pipe, "num", np.zeros(0)))
         lo_f, hi_f = f0 * min(1.0, zf[1]), f0 * max(1.0, zf[1])
     else:
@@ -570,12 +618,16 @@ def _take_richer(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit
     variance unknown), :func:`zero_evidence` shows it, and the held-out blocks prefer it at :data:`FORM_SCORE`
     (:func:`hasel.effects.heldout.held_out_prefers`: on ``loads.py`` seed 3, case 16, a damping-kept load beside a
     delay and a drift was replaced on training by one of these forms, which then removed 47 % of the validation
-    error where the damping-kept form had removed 82 %); else ``fit``."""
+    error where the damping-kept form had removed 82 %); with no more parameters than ``fit`` (the ``model:real``
+    form against the damping form, 3 each) the form is not richer and the held-out blocks need only prefer it
+    (score above 0: ``forms3.py`` seed 1, case 25, a viscous load beside a stick-slip, 0.19 with the training sum
+    of squares 27 % lower); else ``fit``."""
     n = pipe.residuals(_with(effects, fit), "train").size
     s0, s1 = _sse(pipe, _with(effects, fit)), _sse(pipe, _with(effects, rich))
-    if (bic_prefers(n, s0, s1, max(1, len(rich.theta) - len(fit.theta)))
+    extra = len(rich.theta) - len(fit.theta)
+    if (bic_prefers(n, s0, s1, max(1, extra))
             and zero_evidence(pipe, effects, rich)["shown"]
-            and held_out_prefers(pipe, _with(effects, fit), _with(effects, rich), FORM_SCORE)):
+            and held_out_prefers(pipe, _with(effects, fit), _with(effects, rich), FORM_SCORE if extra > 0 else 0.0)):
         return rich
     return fit
 
@@ -607,6 +659,20 @@ def _fit_pair(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -
     return _take_richer(pipe, effects, fit, best)
 
 
+def _fit_real(pipe: FitContext, effects: dict[str, EffectFit], fit: EffectFit) -> EffectFit:
+    """The ``model:real`` form (the model's real poles times a factor, ``mu`` 0) in place of ``fit`` on
+    :func:`_take_richer`'s three conditions; a grid of :data:`REAL_GRID` with ``kappa`` by least squares, the best
+    start refined. Tried only where the measured-over-model magnitude moves within the widest band such a change
+    can act on (:func:`_moved_in`)."""
+    w = np.abs(real_poles(pipe.den)) / (2.0 * math.pi)
+    if not w.size or not _moved_in(pipe, effects, float(w.min()) * REAL_K_MIN / 2.0, 2.0 * float(w.max()) * REAL_K_MAX):
+        return fit
+    starts = [_kappa_ls(pipe, effects, "model:real", (0.0,), (k,)) for k in REAL_GRID]
+    costs = [_sse(pipe, _with(effects, f)) for f in starts]
+    best = _refine_held(pipe, effects, starts[int(np.argmin(costs))], np.array([0.1, 0.1]))
+    return _take_richer(pipe, effects, fit, best)
+
+
 def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     best: dict[str, tuple[float, EffectFit]] = {}
     # both forms (the inertia, and the frequency with the damping ratio kept) on one grid of mu; each form's
@@ -634,6 +700,8 @@ def _fit_load(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | No
         fit = _fit_notch(pipe, effects, fit)
     if PAIR_FORM and _has_resonance(pipe):
         fit = _fit_pair(pipe, effects, fit)
+    if REAL_FORM and getattr(pipe, "den", None) is not None:
+        fit = _fit_real(pipe, effects, fit)
     # the load's weight compresses the actuator: a static offset (a sag, <= 0) beside the changed
     # dynamics; only with a real change of the inertia (an offset alone is no sign of a load), and
     # kept when it lowers the training BIC (one more parameter, noise variance unknown)
@@ -662,12 +730,13 @@ class LoadFamily(EffectFamily):
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
         """``("mass_ratio", "gain_factor"[, "damping_factor" | "mode_hz", "mode_damping_ratio" | "zero_factor",
-        "zero_damping_ratio" | "pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"]
+        "zero_damping_ratio" | "pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio" | "pole_factor"]
         [, "offset"])``."""
         zf = zero_form(fit)
         return (("mass_ratio", "gain_factor") + (("damping_factor",) if damping_factor(fit) is not None else ())
                 + (("mode_hz", "mode_damping_ratio") if mode_of(fit) is not None else ())
                 + (() if zf is None else ("zero_factor", "zero_damping_ratio") if zf[0] == "notch" else
+                   ("pole_factor",) if zf[0] == "real" else
                    ("pair_hz", "pair_damping_ratio", "zero_over_pole", "zero_damping_ratio"))
                 + (("offset",) if "sag" in fit.variant.split(":") else ()))
 
@@ -697,7 +766,7 @@ class LoadFamily(EffectFamily):
         ``MODE_RATIO_MIN``-``MODE_RATIO_MAX`` times the model's resonance (of its slowest pole without one) and its
         damping ratio within ``MODE_ZETA_MIN``-``MODE_ZETA_MAX``, the moved zero pairs' factor and damping ratio
         (``NOTCH_*``), the added pair's pole frequency (Hz), damping ratios and zero-over-pole ratio (``PAIR_*``),
-        ``sag <= 0``."""
+        the real poles' factor (``REAL_K_*``), ``sag <= 0``."""
         damp = damping_factor(fit) is not None
         hi_mu = ZETA_MU_MAX if keeps_zeta(fit) or damp else 10.0
         lo, hi = [-0.8, 0.05], [hi_mu, 20.0]
@@ -715,6 +784,9 @@ class LoadFamily(EffectFamily):
         if zf is not None and zf[0] == "notch":
             lo += [NOTCH_K_MIN, 0.0]
             hi += [NOTCH_K_MAX, NOTCH_ZETA_MAX]
+        elif zf is not None and zf[0] == "real":
+            lo.append(REAL_K_MIN)
+            hi.append(REAL_K_MAX)
         elif zf is not None:
             fres = resonance_hz(np.asarray(getattr(ctx, "den"), float))
             lo += [PAIR_RATIO_MIN * fres, PAIR_ZETA_MIN, PAIR_ZP_MIN, PAIR_ZETA_MIN]
@@ -743,6 +815,9 @@ class LoadFamily(EffectFamily):
                                                       "times zero_factor, damping ratio zero_damping_ratio, static "
                                                       "gain kept"
                                                       if (zero_form(fit) or ("",))[0] == "notch" else
+                                                      "the real poles slowed or sped (a viscous load): their "
+                                                      "frequencies times pole_factor, static gain kept"
+                                                      if (zero_form(fit) or ("",))[0] == "real" else
                                                       "an added pole-zero pair below the resonance (a payload "
                                                       "swinging on its mount): poles at pair_hz, zeros at "
                                                       "zero_over_pole x pair_hz, static gain kept"
@@ -772,6 +847,10 @@ class LoadFamily(EffectFamily):
             out["zero_factor"], out["zero_damping_ratio"] = zf[1], zf[2]
             f0 = antiresonance_hz(getattr(ctx, "num", np.zeros(0)))
             out["antiresonance_model_hz"], out["antiresonance_loaded_hz"] = f0, f0 * zf[1]
+        elif zf is not None and zf[0] == "real":
+            out["pole_factor"] = zf[1]
+            w = np.sort(np.abs(real_poles(getattr(ctx, "den", np.zeros(0))))) / (2.0 * math.pi)
+            out["real_poles_model_hz"], out["real_poles_loaded_hz"] = w.tolist(), (w * zf[1]).tolist()
         elif zf is not None:
             out["pair_hz"], out["pair_damping_ratio"], out["zero_over_pole"], out["zero_damping_ratio"] = zf[1:]
             out["pair_zero_hz"] = zf[1] * zf[3]
