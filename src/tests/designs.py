@@ -124,6 +124,25 @@ def chunked_gap(make_stage, u: np.ndarray, cut: int) -> float:
     return float(np.max(np.abs(a.run(u) - np.concatenate([b.run(u[:cut]), b.run(u[cut:])]))))
 
 
+def swing_over_nominal(model, f_hz: float, rate_hz: float = 10_000.0) -> float:
+    """Peak-to-peak stroke (mm over mm) of the simulator's actuator built from the plant model ``model``
+    (:class:`hasel.plantfile.PlantModel`) over that of P(s)'s, both driven by ``4 + 0.3 sin(2 pi f_hz t)`` kV for 4 s at
+    ``rate_hz`` (the amplifier's filter included), the last two seconds (settled)."""
+    from hasel.plantchain import build_actuator
+    from hasel.plantfile import PlantModel
+
+    tt = np.arange(int(4.0 * rate_hz)) / rate_hz
+    cmd = 4.0 + 0.3 * np.sin(2.0 * np.pi * f_hz * tt)
+
+    def swing(m) -> float:
+        act = build_actuator(m)
+        act.reset(4.0)
+        return float(np.ptp(act.run(cmd).stroke_mm[int(2.0 * rate_hz):]))
+
+    num, den = paper.plant_tf()
+    return swing(model) / swing(PlantModel(tuple(num), tuple(den)))
+
+
 def cosine_chirp(rate_hz: float = 500.0, dur_s: float = 20.0) -> np.ndarray:
     """Raised-cosine log chirp 0.2-20 Hz between 0 and 7 kV (kV), ``dur_s`` at ``rate_hz`` (a HASEL driven from
     0 kV, as the static-map form tests use)."""
