@@ -101,6 +101,8 @@ def test_an_added_pair_is_named_a_load_with_its_frequency(f_hz, zp, ratio, zz, s
     assert p["variant"].startswith("model:pair")
     assert abs(p["pair_hz"] / f_hz - 1.0) < 0.05
     assert abs(p["pair_zero_hz"] / (f_hz * ratio) - 1.0) < 0.05
+    words = next(e for e in v.effects if e["name"] == "load_mass")["evidence"]
+    assert f"poles at {p['pair_hz']:.3g} Hz" in words and "mass ratio" not in words, words
     assert v.heldout["nrmse_augmented"] < 0.3 * v.heldout["nrmse_nominal"]
 
 

@@ -76,6 +76,8 @@ def test_a_viscous_load_is_named_a_load_with_its_factor(k, seed):
     assert p["variant"].startswith("model:real")
     assert abs(p["pole_factor"] / k - 1.0) < 0.05
     assert p["real_poles_loaded_hz"][0] == pytest.approx(18.85 / (2 * math.pi) * p["pole_factor"], rel=1e-3)
+    words = next(e for e in v.effects if e["name"] == "load_mass")["evidence"]
+    assert f"the real poles {'slowed' if k < 1 else 'sped'} (a viscous load)" in words, words
     assert v.heldout["nrmse_augmented"] < 0.33 * v.heldout["nrmse_nominal"]
 
 

@@ -3,10 +3,36 @@ from __future__ import annotations
 
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.effects.asymmetric import INPUT as ASYM_INPUT
-from hasel.effects.load import load_offset
+from hasel.effects.load import damping_factor, keeps_zeta, load_offset, mode_of, zero_form
 from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 
 __all__: list[str] = []
+
+
+
+def _load_text(fit: EffectFit) -> str:
+    """What a ``load_mass`` fit changed, in words, by its form (:mod:`hasel.effects.load`): frequencies in Hz,
+    factors and damping ratios dimensionless."""
+    mu = float(fit.theta[0])
+    res = f"x{(1.0 + mu) ** -0.5:.3g}" if mu > -1.0 else "(undefined)"
+    zf, md, d = zero_form(fit), mode_of(fit), damping_factor(fit)
+    if zf is not None and zf[0] == "real":
+        return (f"the real poles {'slowed' if zf[1] < 1.0 else 'sped'} (a viscous load): their frequencies "
+                f"x{zf[1]:.3g}, static gain kept")
+    if zf is not None and zf[0] == "notch":
+        return (f"the anti-resonance moved: the zero pairs' frequency x{zf[1]:.3g}, damping ratio {zf[2]:.3g}, "
+                f"static gain kept")
+    if zf is not None:
+        return (f"an added pole-zero pair below the resonance (a payload swinging on its mount): poles at "
+                f"{zf[1]:.3g} Hz (damping ratio {zf[2]:.3g}), zeros at {zf[1] * zf[3]:.3g} Hz, static gain kept")
+    if md is not None:
+        return f"an added mode at {md[0]:.3g} Hz (damping ratio {md[1]:.3g}), static gain kept"
+    if d is not None:
+        return f"the resonance's frequency {res} and its damping ratio x{d:.3g} (mass ratio {mu:+.3g})"
+    if keeps_zeta(fit):
+        return f"the resonance's frequency {res}, its damping ratio kept (mass ratio {mu:+.3g})"
+    return (f"the resonance's inertia {'grew' if mu >= 0 else 'fell'}: frequency and damping ratio {res} (mass "
+            f"ratio {mu:+.3g})")
 
 
 def _repeat_text(tm: dict) -> str:
@@ -73,10 +99,9 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                        f"{where['rate']['corr_residual_vs_nominal_rate']:+.2f}, as a lag does) and the "
                        f"model-error model is significant in {band_txt}; delay {fit.theta[0]:.4g} s"),
         "load_mass": lambda: (f"the gap is linear (a linear model-error model explains {_pct(me['linear_share'])} of "
-                      f"the residual, significant in {band_txt}): the resonance and gain moved "
-                      f"(mass ratio {fit.theta[0]:+.3g}, gain x{fit.theta[1]:.3g}"
-                      + (f", and the load's weight offsets the output by {load_offset(fit):+.3g})" if "sag" in fit.variant.split(":")
-                         else ")")),
+                      f"the residual, significant in {band_txt}): {_load_text(fit)}; gain factor {fit.theta[1]:.3g}"
+                      + (f", and the load's weight offsets the output by {load_offset(fit):+.3g}{units[1] and ' ' + units[1]}"
+                         if "sag" in fit.variant.split(":") else "")),
         "hysteresis": lambda: (f"at equal output level the residual depends on the direction (rising minus falling "
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
                        f"direction adds {_pct(dr['extra_share'])} to the level's share; at equal input "
