@@ -6,7 +6,8 @@ Forms
   the output filter (:class:`ClipStage`, both ends); ``"stroke"`` bends the stroke over
   into ``limit_mm`` with a smooth knee (:class:`SoftLimitStage`).
 - generic ``input:upper|lower`` / ``output:upper|lower`` (``theta = (limit,)``): a clip of
-  the input or of the output; ``measured:upper|lower|both`` (``(limit,)`` or
+  the input or of the output; ``output:both`` (``(lower, upper)``): hard end stops of the stroke on both sides
+  (:data:`BOTH_ENDS`); ``measured:upper|lower|both`` (``(limit,)`` or
   ``(lower, upper)``): the measured range where the output piles up, applied last;
   ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`); ``output:slew``
   (``(S,)``): the stroke moves at most ``S`` per second either way (the liquid cannot flow faster through the
@@ -27,8 +28,8 @@ from typing import ClassVar
 import numpy as np
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import (_downstream_nonlinear, _fit_scalar, _ls, _refine, _sse, _with, fit_log_scalar,
-                                  rate_grid)
+from hasel.effects.fitkit import (_downstream_nonlinear, _fit_scalar, _ls, _refine, _sse, _with, bic_prefers,
+                                  fit_log_scalar, rate_grid)
 from hasel.effects.operators import rate_limited, rate_step
 from hasel.errors import BadInputError
 from hasel.validate import positive
@@ -92,6 +93,13 @@ class Saturation(Effect):
         return cls(kind=kind, limit_kv=float(rng.uniform(5.2, 6.3)), limit_mm=float(rng.uniform(6.5, 8.0)),
                    knee_mm=float(rng.uniform(0.02, 0.15)))
 
+
+#: Whether the family tries a clip of the output at both ends (``output:both``): hard end stops of the stroke on
+#: both sides, with sensor noise after them, pile no measured samples on one value (``measured:both`` needs that),
+#: and a one-sided clip leaves the other end (``bench/tune_diag/forms3.py`` seed 1, ``zstop2``: the lower stop
+#: named, the upper left, 18x the floor). Taken over the best one-sided output clip when the training BIC prefers
+#: its one more parameter.
+BOTH_ENDS = True
 
 #: the fitted end stop's knee lies at or beyond this quantile of the output (upper end; 1 - it for
 #: the lower): an end stop engages near the end of the travel and leaves the rest straight, where a
@@ -332,6 +340,7 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
     xs = np.concatenate([s["x_sat"] for s in st])
     ys = np.concatenate([s["y_drift"] for s in st])
     qs = np.array([0.6, 0.75, 0.85, 0.92, 0.96, 0.98, 0.99, 0.995])
+    ends: dict[str, EffectFit] = {}
     for side, sig in (("input", xs), ("output", ys)):
         for end in ("upper", "lower"):
             variant = f"{side}:{end}"
@@ -339,9 +348,18 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
             fit = _fit_scalar(pipe, effects, lambda v, variant=variant: EffectFit("saturation", variant, (v,)), grid)
             if fit is None:
                 continue
+            if side == "output":
+                ends[end] = fit
             c = _sse(pipe, _with(effects, fit))
             if c < best_cost:
                 best, best_cost = fit, c
+    if BOTH_ENDS and best is not None and best.variant in ("output:upper", "output:lower") and len(ends) == 2:
+        both = _fit_both(pipe, effects, ends, ys, qs)
+        if both is not None:
+            n = pipe.residuals(_with(effects, best), "train").size
+            c = _sse(pipe, _with(effects, both))
+            if bic_prefers(n, best_cost, c, 1):
+                best, best_cost = both, c
     stop = _fit_stop(pipe, effects, ys)
     if stop is not None:
         c = _sse(pipe, _with(effects, stop))
@@ -356,6 +374,25 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
             best, best_cost = EffectFit("saturation", variant, (rate,)), c
     return best
 
+
+
+def _fit_both(pipe: FitContext, effects: dict[str, EffectFit], ends: dict[str, EffectFit], ys: np.ndarray,
+              qs: np.ndarray) -> EffectFit | None:
+    """A clip of the output at both ends (``output:both``, ``theta = (lower, upper)``, output units): each end
+    searched on its quantile grid with the other held, twice, from the one-sided fits ``ends``; None when the
+    ends cross."""
+    lo, hi = float(ends["lower"].theta[0]), float(ends["upper"].theta[0])
+    if not lo < hi:
+        return None
+    g_up, g_lo = np.unique(np.quantile(ys, qs)), np.unique(np.quantile(ys, 1.0 - qs))
+    for _ in range(2):
+        f = _fit_scalar(pipe, effects, lambda v, lo=lo: EffectFit("saturation", "output:both", (lo, max(v, lo))),
+                        g_up[g_up > lo])
+        hi = float(f.theta[1]) if f is not None else hi
+        f = _fit_scalar(pipe, effects, lambda v, hi=hi: EffectFit("saturation", "output:both", (min(v, hi), hi)),
+                        g_lo[g_lo < hi])
+        lo = float(f.theta[0]) if f is not None else lo
+    return EffectFit("saturation", "output:both", (lo, hi)) if lo < hi else None
 
 
 def stop_map(y: np.ndarray, f: EffectFit) -> np.ndarray:
