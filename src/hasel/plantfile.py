@@ -374,7 +374,6 @@ def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantMo
     from hasel.diagnose.augment import split_linear
     from hasel.effects.base import LINEAR
     from hasel.effects.drift import smoothing_s
-    from hasel.effects.registry import FAMILIES
 
     if tuple(units) != ("kV", "mm"):
         raise PlantFileError(f"--export-plant needs the data in kV (input) and mm (output), got {units[0] or '?'} "
@@ -384,12 +383,12 @@ def from_verdict(verdict: Any, units: tuple[str, str] = ("kV", "mm")) -> PlantMo
     named = set(verdict.names)
     fits = sorted((f for n, f in current.items() if n != LINEAR and n in named), key=lambda f: f.slot)
     left = [{"name": n, "variant": f.variant,
-             "params": dict(zip(FAMILIES[n].param_names(f), map(float, f.theta))),
+             "params": {k: float(x) for k, x in f.named().items()},
              "why": "a timing offset within one sample (the log's sampling convention or a clock offset between "
                     "its channels), not named by the diagnosis: not the actuator's physics"}
             for n, f in current.items() if n != LINEAR and n not in named]
-    effects = tuple(EffectEntry(f.name, dict(zip(FAMILIES[f.name].param_names(f), map(float, f.theta))),
-                                "fitted", f.variant) for f in fits)
+    effects = tuple(EffectEntry(f.name, {k: float(x) for k, x in f.named().items()}, "fitted", f.variant)
+                    for f in fits)
     scales = {"u_c": float(pipe.u_c), "u_s": float(pipe.u_s), "y_c": float(pipe.y_c), "y_s": float(pipe.y_s),
               "thresholds": [float(r) for r in pipe.thresholds], "tau_smooth_s": float(smoothing_s(pipe))}
     model = PlantModel(tuple(map(float, num)), tuple(map(float, den)), float(pipe.delay_s), effects,

@@ -188,10 +188,11 @@ def _run(args: argparse.Namespace, say: Progress) -> int:
         _write_atomic(args.json, json.dumps(json_safe(out), indent=2, allow_nan=False) + "\n")
         say(f"wrote {args.json}")
     if getattr(args, "export_plant", None):
-        from hasel.plantfile import export_plant, read_plant
+        from hasel.plantfile import from_verdict, write_plant
 
-        path = export_plant(v, args.export_plant, units)
-        left = read_plant(path).extra.get("not_simulated") or []
+        plant = from_verdict(v, units)
+        path = write_plant(args.export_plant, plant)
+        left = plant.extra.get("not_simulated") or []
         say(f"wrote {path}" + "".join(f" ({e['name']} {', '.join(f'{k} {x:.4g}' for k, x in e['params'].items())} "
                                       f"left out: a timing offset, not physics)" for e in left))
     if args.export_sim:

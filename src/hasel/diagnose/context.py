@@ -17,6 +17,7 @@ from hasel.diagnose.options import DiagnoseOptions
 from hasel.diagnose.prep import Prepared
 from hasel.diagnose.significance import block_test, coloured_z
 from hasel.effects.heldout import block_labels
+from hasel.effects.load import mode_of, zero_form
 from hasel.errors import BadInputError
 
 __all__ = ["raised_resonance"]
@@ -181,8 +182,6 @@ def raised_resonance(effects: dict[str, EffectFit], den: np.ndarray | None = Non
     f = effects.get("load_mass")
     if f is None or not f.theta or f.theta[0] >= 0.0:
         return False
-    from hasel.effects.load import mode_of, zero_form
-
     if (zero_form(f) is not None or mode_of(f) is not None) and f.theta[0] > -HELD_MU_TOL:
         # these forms hold mu at 0 (the model's resonances kept); a joint refinement's nudge is no raised resonance
         return False

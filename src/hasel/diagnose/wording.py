@@ -9,7 +9,6 @@ from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 __all__: list[str] = []
 
 
-
 def _load_text(fit: EffectFit) -> str:
     """What a ``load_mass`` fit changed, in words, by its form (:mod:`hasel.effects.load`): frequencies in Hz,
     factors and damping ratios dimensionless."""

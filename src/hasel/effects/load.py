@@ -250,11 +250,15 @@ def apply_zero_form(num: np.ndarray, den: np.ndarray, form: tuple | None) -> tup
             np.polymul(den, [1.0 / (wp * wp), 2.0 * float(form[2]) / wp, 1.0]))
 
 
+def _nonzero_real(p: np.ndarray) -> np.ndarray:
+    """Mask of the roots ``p`` that are real (imaginary part within rounding) and not at 0."""
+    return (np.abs(p.imag) <= 1e-9 * np.maximum(1.0, np.abs(p))) & (np.abs(p) > 1e-12)
+
+
 def real_poles(den) -> np.ndarray:
     """The nonzero real poles of ``den`` (descending powers of s; rad/s, negative for stable ones)."""
     p = np.roots(np.asarray(den, float))
-    real = (np.abs(p.imag) <= 1e-9 * np.maximum(1.0, np.abs(p))) & (np.abs(p) > 1e-12)
-    return p[real].real
+    return p[_nonzero_real(p)].real
 
 
 def scale_real_poles(den: np.ndarray, k: float) -> np.ndarray:
@@ -264,7 +268,7 @@ def scale_real_poles(den: np.ndarray, k: float) -> np.ndarray:
     if k == 1.0:
         return den.copy()
     p = np.roots(den)
-    real = (np.abs(p.imag) <= 1e-9 * np.maximum(1.0, np.abs(p))) & (np.abs(p) > 1e-12)
+    real = _nonzero_real(p)
     if not np.any(real):
         return den.copy()
     p2 = p.copy()
