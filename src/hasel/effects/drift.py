@@ -405,6 +405,22 @@ def _box_on(m: np.ndarray, n: int):
     return box
 
 
+def _refine_tau_pair(cost, ranked: list, c0: float) -> np.ndarray | None:
+    """A pair of time constants refined in ``log`` s by Nelder-Mead (20 evaluations of ``cost``) from each of the
+    two best grid points ``ranked`` (``(cost, fit)``, the fit's first two parameters the pair; a point without a
+    fit or a finite cost is no start); the best log pair below ``c0``, or None."""
+    c1, x1 = c0, None
+    for c_start, start in ranked[:2]:
+        if start is None or not math.isfinite(c_start):  # a penalised second is no start
+            continue
+        res = optimize.minimize(cost, np.log(start.theta[:2]), method="Nelder-Mead",
+                                options={"maxfev": 20, "xatol": 0.05, "fatol": 1e-9 * max(c0, 1e-300)})
+        c = cost(res.x)
+        if c < c1:
+            c1, x1 = c, res.x
+    return x1
+
+
 def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     """The ``output:2tau`` form: weights by least squares on slow parts for a grid of (fast, slow) time
     constants, the pair refined on the log scale; ``None`` when the log is too short for two, or when a
@@ -478,15 +494,7 @@ def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
     # refined from the best grid pair and from the second best: scipy's first simplex steps 5 % of each log time
     # constant, no step at all near 1 s, so a start there stays put (test_drift_forms: a 2 s trap fitted 1.07 s
     # from the 1.06 s point on one machine, 2.04 s from the 2.12 s point on another)
-    c1, x1 = c0, None
-    for c_start, start in ranked[:2]:
-        if not math.isfinite(c_start):  # the best's cost is finite (checked above); a penalised second is no start
-            continue
-        res = optimize.minimize(cost, np.log(start.theta[:2]), method="Nelder-Mead",
-                                options={"maxfev": 20, "xatol": 0.05, "fatol": 1e-9 * max(c0, 1e-300)})
-        c = cost(res.x)
-        if c < c1:
-            c1, x1 = c, res.x
+    x1 = _refine_tau_pair(cost, ranked, c0)
     if x1 is not None:
         best = ls_at(math.exp(float(x1[0])), math.exp(float(x1[1])))[1]
     # a charge follows the input's history; a sensor warm-up is a function of time only. Started at rest with
@@ -563,15 +571,7 @@ def _fit_absorb(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
             return c0 * 10.0 + 1.0
         return min(ls_at(tf, tsl)[0], c0 * 10.0 + 1.0)
 
-    c1, x1 = c0, None
-    for c_start, start in ranked[:2]:
-        if start is None or not math.isfinite(c_start):
-            continue
-        res = optimize.minimize(cost, np.log(start.theta[:2]), method="Nelder-Mead",
-                                options={"maxfev": 20, "xatol": 0.05, "fatol": 1e-9 * max(c0, 1e-300)})
-        c = cost(res.x)
-        if c < c1:
-            c1, x1 = c, res.x
+    x1 = _refine_tau_pair(cost, ranked, c0)
     if x1 is not None:
         cand = ls_at(math.exp(float(x1[0])), math.exp(float(x1[1])))[1]
         best = cand if cand is not None else best
