@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import signal
 
 import designs
 from hasel import paper
@@ -97,7 +98,6 @@ def test_hard_stops_at_both_ends_with_noise_after_them_are_one_saturation(seed, 
     e = rng.standard_normal(z.size)
     if noise == "ar1":
         a = np.exp(-2 * np.pi * 10.0 / RATE_HZ)
-        from scipy import signal
         e = signal.lfilter([np.sqrt(1 - a * a)], [1.0, -a], e)
     y = np.clip(z, lo, hi) + 0.005 * e
     v = diagnose(np.arange(u.size) / RATE_HZ, u, y, model=_model(), units=("kV", "mm"))

@@ -7,7 +7,7 @@ Forms
   into ``limit_mm`` with a smooth knee (:class:`SoftLimitStage`).
 - generic ``input:upper|lower`` / ``output:upper|lower`` (``theta = (limit,)``): a clip of
   the input or of the output; ``output:both`` (``(lower, upper)``): hard end stops of the stroke on both sides
-  (:data:`BOTH_ENDS`); ``measured:upper|lower|both`` (``(limit,)`` or
+  (:func:`_fit_both`); ``measured:upper|lower|both`` (``(limit,)`` or
   ``(lower, upper)``): the measured range where the output piles up, applied last;
   ``slew`` (``(S,)``): the input moves at most ``S`` per second (:class:`SlewStage`); ``output:slew``
   (``(S,)``): the stroke moves at most ``S`` per second either way (the liquid cannot flow faster through the
@@ -93,13 +93,6 @@ class Saturation(Effect):
         return cls(kind=kind, limit_kv=float(rng.uniform(5.2, 6.3)), limit_mm=float(rng.uniform(6.5, 8.0)),
                    knee_mm=float(rng.uniform(0.02, 0.15)))
 
-
-#: Whether the family tries a clip of the output at both ends (``output:both``): hard end stops of the stroke on
-#: both sides, with sensor noise after them, pile no measured samples on one value (``measured:both`` needs that),
-#: and a one-sided clip leaves the other end (``bench/tune_diag/forms3.py`` seed 1, ``zstop2``: the lower stop
-#: named, the upper left, 18x the floor). Taken over the best one-sided output clip when the training BIC prefers
-#: its one more parameter.
-BOTH_ENDS = True
 
 #: the fitted end stop's knee lies at or beyond this quantile of the output (upper end; 1 - it for
 #: the lower): an end stop engages near the end of the travel and leaves the rest straight, where a
@@ -353,7 +346,7 @@ def _fit_saturation(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
             c = _sse(pipe, _with(effects, fit))
             if c < best_cost:
                 best, best_cost = fit, c
-    if BOTH_ENDS and best is not None and best.variant in ("output:upper", "output:lower") and len(ends) == 2:
+    if best is not None and best.variant in ("output:upper", "output:lower") and len(ends) == 2:
         both = _fit_both(pipe, effects, ends, ys, qs)
         if both is not None:
             n = pipe.residuals(_with(effects, best), "train").size
@@ -380,7 +373,11 @@ def _fit_both(pipe: FitContext, effects: dict[str, EffectFit], ends: dict[str, E
               qs: np.ndarray) -> EffectFit | None:
     """A clip of the output at both ends (``output:both``, ``theta = (lower, upper)``, output units): each end
     searched on its quantile grid with the other held, twice, from the one-sided fits ``ends``; None when the
-    ends cross."""
+    ends cross. Taken over the best one-sided output clip when the training BIC prefers its one more parameter.
+
+    Why: hard end stops of the stroke on both sides, with sensor noise after them, pile no measured samples on one
+    value (``measured:both`` needs that), and a one-sided clip leaves the other end (``bench/tune_diag/forms3.py``
+    seed 1, ``zstop2``: the lower stop named, the upper left, 18x the floor)."""
     lo, hi = float(ends["lower"].theta[0]), float(ends["upper"].theta[0])
     if not lo < hi:
         return None
