@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.effects.asymmetric import INPUT as ASYM_INPUT
+from hasel.effects.drift import ABSORB
 from hasel.effects.load import damping_factor, keeps_zeta, load_offset, mode_of, zero_form
 from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 
@@ -115,9 +116,15 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                                    f"{fit.variant.split(':')[1]} (a speed limit; the other way it follows at once)"
                                    if fit.variant.startswith("rate_limit") else
                                    f"rises with tau {_tau(fit.theta[0])} and falls with tau {_tau(fit.theta[1])}")),
-        "charge_drift": lambda: (f"the residual varies slowly in time (slow share {_pct(tm['slow_share'])}, trend "
+        "charge_drift": lambda: ((f"part of the response arrives late (dielectric absorption or creep): "
+                                  f"shares {100 * fit.theta[2]:+.3g} % of it through a lag of {fit.theta[0]:.3g} s and "
+                                  f"{100 * fit.theta[3]:+.3g} % through one of {fit.theta[1]:.3g} s (negative: an "
+                                  f"overshoot that relaxes), the static gain kept "
+                                  f"(slow share of the residual {_pct(tm['slow_share'])})")
+                                 if fit.variant == ABSORB else
+                                 f"the residual varies slowly in time (slow share {_pct(tm['slow_share'])}, trend "
                                  f"t = {tm['trend_t']:+.1f}) following the history of the input (tau "
-                                 f"{fit.theta[0]:.3g} s), not its present level" + _repeat_text(tm)),
+                                 f"{fit.theta[0]:.3g} s), not its present level") + _repeat_text(tm),
     }[name]()
     txt = f"{sig}; taken out alone, {_pct(gain)} of the nominal residual energy comes back on validation"
     if credit_final is not None:
