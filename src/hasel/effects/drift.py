@@ -438,11 +438,7 @@ def _fit_drift2(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
     # acts (linear in its weights; exact unless an output clip or sensor map follows); the chosen pair's
     # cost is then the pipeline's own
     recs = []
-    for ri, rec in enumerate(pipe.prep.records):
-        m = rec.train
-        if not m.any():
-            continue
-        st = pipe.stages(base, ri)
+    for _ri, rec, m, st in _train_stages(pipe, base):
         r = rec.y - st["y"]
         recs.append((m, st["x_sat"], st["y_asym"], r[m], _box_on(m, smooth), (rec.t_s - rec.t_s[0])[m]))
     if not recs:
@@ -519,11 +515,7 @@ def _fit_absorb(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
         return None
     base = {k: v for k, v in effects.items() if k != "charge_drift"}
     recs = []
-    for ri, rec in enumerate(pipe.prep.records):
-        m = rec.train
-        if not m.any():
-            continue
-        st = pipe.stages(base, ri)
+    for _ri, rec, m, st in _train_stages(pipe, base):
         recs.append((m, st["y_asym"], (rec.y - st["y"])[m]))
     if not recs:
         return None
@@ -734,14 +726,19 @@ def _one_tau_fit(pipe: FitContext, effects: dict[str, EffectFit], charge_of, var
     return best, best_c
 
 
+def _train_stages(pipe: FitContext, base: dict[str, EffectFit]):
+    """Per record with training samples: its index, the record, its training mask and the chain's stages of
+    ``base`` (:meth:`FitContext.stages`), the drift's fits' common start."""
+    for ri, rec in enumerate(pipe.prep.records):
+        m = rec.train
+        if m.any():
+            yield ri, rec, m, pipe.stages(base, ri)
+
+
 def _time_sse(pipe: FitContext, base: dict[str, EffectFit], f: EffectFit, charge_of) -> float:
     """Training SSE of the one-tau law with the time-only charge ``charge_of`` (not a chain form: computed here)."""
     tot = 0.0
-    for ri, rec in enumerate(pipe.prep.records):
-        m = rec.train
-        if not m.any():
-            continue
-        st = pipe.stages(base, ri)
+    for ri, rec, m, st in _train_stages(pipe, base):
         q = charge_of(st["x_sat"], f.theta[0], ri)
         y = st["y"] + f.theta[1] * q * st["y_asym"] + pipe.y_s * f.theta[2] * q
         tot += sumsq((rec.y - y)[m])
