@@ -347,7 +347,7 @@ def make_case(directory: str, seed: int, i: int) -> dict | None:
             sd = raw[small] / float(rng.uniform(3.0, 5.0))
             ok = all(r / sd >= 4.0 for j, r in enumerate(raw) if j != small)
         else:
-            if len(raw) > 1 and max(raw) / min(raw) > 6.0:
+            if len(raw) > 1 and max(raw) > 6.0 * min(raw):  # a member with no visible part (min 0) too
                 continue
             sd = min(raw) / float(rng.uniform(4.0, 10.0))
             ok = True
