@@ -37,7 +37,7 @@ from hasel.effects.heldout import held_out_prefers
 from hasel.effects.operators import BoucWen, monotone_runs, play
 from hasel.validate import in_range, positive
 
-__all__ = ["Hysteresis", "HYST_THRESHOLDS", "OUTPUT", "output_thresholds", "input_loop", "PlayStage", "BoucWenStage", "branch", "play_support", "HysteresisFamily", "FAMILY"]
+__all__ = ["Hysteresis", "HYST_THRESHOLDS", "OUTPUT", "output_thresholds", "input_loop", "is_output_loop", "PlayStage", "BoucWenStage", "branch", "play_support", "HysteresisFamily", "FAMILY"]
 
 #: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
 HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
@@ -50,6 +50,12 @@ def input_loop(effects: dict) -> bool:
     map of the hysteresis output, between it and the dynamics, needs."""
     f = effects.get("hysteresis")
     return f is not None and f.variant != OUTPUT
+
+
+def is_output_loop(f) -> bool:
+    """Whether the fit ``f`` (an :class:`EffectFit`) is a loop of the stroke: a map of the output level with
+    memory, which the diagnosis's slow-only test treats as it treats the maps."""
+    return f.name == "hysteresis" and f.variant == OUTPUT
 
 
 def output_thresholds(y_s: float) -> tuple[float, ...]:
