@@ -24,6 +24,7 @@ import numpy as np
 
 from hasel.effects.asymmetric import INPUT as ASYM_INPUT
 from hasel.effects.base import EffectFit, Stage
+from hasel.effects.hysteresis import OUTPUT as OUTPUT_HYST
 from hasel.lti import SosFilter, zoh_sos
 from hasel.plant import ActuatorSamples, NominalActuator, NominalConfig, amplifier_filter_tf
 from hasel.plantfile import PlantModel
@@ -78,7 +79,8 @@ class FittedChain:
         self._delay = stage("time_delay")
         self._sat_in = stage("saturation", "input", "slew")
         self._map_in = stage("static_nonlinearity", "input")
-        self._hyst = stage("hysteresis")
+        self._hyst = stage("hysteresis", "input")
+        self._hyst_out = stage("hysteresis", OUTPUT_HYST)  # a memory of the stroke, after the dynamics
         self._map_hyst = stage("static_nonlinearity", "after_hysteresis")  # a map of the hysteresis output
         self._map_int = stage("static_nonlinearity", "internal")
         self._asym_in = stage("asymmetric_dynamics", ASYM_INPUT)  # the lag of the voltage, before the dynamics
@@ -113,7 +115,7 @@ class FittedChain:
         x = self._v_prev = _rest(self._map_hyst, _rest(self._hyst, x))
         y = _rest(self._lin, x if self._split else c)
         y = _rest(self._map_int, y)
-        y = _rest(self._asym, y)
+        y = _rest(self._hyst_out, _rest(self._asym, y))
         if self._drift is not None:
             self._drift.reset(y)
         y = _rest(self._sat_out, y)
@@ -137,7 +139,7 @@ class FittedChain:
             y = self._lin.run(x_mid)
         else:
             y = self._lin.run(c)
-        for st in (self._map_int, self._asym):
+        for st in (self._map_int, self._asym, self._hyst_out):
             y = y if st is None else st.run(y)
         if self._drift is not None:
             y = self._drift.run(y, x_sat)

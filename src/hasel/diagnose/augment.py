@@ -89,7 +89,8 @@ from hasel.effects.drift import pipe_output as drift_output
 from hasel.effects.fitkit import (POLY_RIDGE, STATIC_DEGREE, _downstream_nonlinear, _fit_scalar,  # noqa: F401
                                   _ls, _poly_ls, _refine, _sse, _train_halves, _train_smooth, _with, fit_log_scalar,
                                   monomial, monomials, poly_map, rate_grid, sumsq)
-from hasel.effects.hysteresis import HYST_THRESHOLDS
+from hasel.effects.hysteresis import HYST_THRESHOLDS, output_thresholds
+from hasel.effects.hysteresis import OUTPUT as OUTPUT_HYST
 from hasel.effects.hysteresis import branch as _branch
 from hasel.effects.load import (LOAD_SAG_MIN_MU, apply_zero_form, damping_factor, keeps_zeta, load_offset,  # noqa: F401
                                loaded_den, mode_of, zero_form)
@@ -246,7 +247,8 @@ class Pipeline:
 
         Keys: ``"x_delay"``, ``"x_sat"``, ``"x_map"``, ``"x_hyst"`` (after the hysteresis), ``"x_eff"`` (after
         a map of the hysteresis output, if any: the linear part's input) (input side), ``"y_lin"``,
-        ``"y_int"``, ``"y_asym"``, ``"y_drift"``, ``"y_sat"``, ``"y"`` (output side); a stage
+        ``"y_int"``, ``"y_asym"`` (after an asymmetric lag and a loop of the output, ``hysteresis:output``),
+        ``"y_drift"``, ``"y_sat"``, ``"y"`` (output side); a stage
         past ``upto`` is the identity.
         """
         rec = self.prep.records[ri]
@@ -278,7 +280,7 @@ class Pipeline:
             x = apply_input(f, x, self.u_c, self.u_s)
         out["x_map"] = x
         f = e.get("hysteresis")
-        if f is not None:
+        if f is not None and f.variant != OUTPUT_HYST:
             # the starting branch is that of the log it was fitted on (record 0); another log's
             # history is unknown: its plays start centred
             ps = self.plays(ri, x, key, _branch(f) if ri == 0 else 0.0)
@@ -313,6 +315,14 @@ class Pipeline:
             # a state-dependent recursion: kept for the fits that hold it fixed (of the stages after it)
             key += ("a", f.variant) + f.theta
             y = self._memo(("ya", ri) + key, lambda y=y, f=f: self._asym(y, f))
+        f = e.get("hysteresis")
+        if f is not None and f.variant == OUTPUT_HYST:
+            # a loop of the stroke; its starting branch as the input's (record 0's own, others centred)
+            c = _branch(f) if ri == 0 else 0.0
+            key += ("ho", c) + f.theta
+            y = self._memo(("yh", ri) + key, lambda y=y, f=f, c=c: y + sum(
+                w * (play(y, r, float(y[0]) + c * r) - y)
+                for w, r in zip(f.theta[:len(HYST_THRESHOLDS)], output_thresholds(self.y_s))))
         out["y_asym"] = y
         f = e.get("charge_drift")
         if f is not None and f.variant != "output":

@@ -18,6 +18,7 @@ from hasel.diagnose.augment import LINEAR, EffectFit, fit_drift_on_repeats, fit_
 from hasel.diagnose.context import _Context, _fixed, _pick, _raises, _State, _without, raised_resonance
 from hasel.diagnose.significance import _SEPARATING, block_test
 from hasel.effects.evidence import magnitude_evidence
+from hasel.effects.hysteresis import input_loop
 from hasel.effects.static_map import AFTER_HYST, AFTER_HYST_KNEE, fit_after_hysteresis, is_after_hysteresis
 
 __all__: list[str] = []
@@ -158,7 +159,7 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
     names_ = [k for k, v in st.current.items() if k != LINEAR and not _fixed(k, v)]
     have = [n for n in _MAP_SIDES if n in st.current]
     if (len(have) != 1 or len(names_) < 2 or _fixed(have[0], st.current[have[0]])
-            or "hysteresis" in st.current):
+            or input_loop(st.current)):
         # beside a hysteresis the chain puts an input map before it, while a map after the hysteresis (an
         # actuator's curve of its hysteretic strain) is closer to a sensor curve at low frequencies: the
         # comparison would favour the output side for the chain's order, not for the data
@@ -166,7 +167,7 @@ def _map_side_stage(ctx: _Context, st: _State) -> None:
         # map is compared with one of the hysteresis output (the slot between the hysteresis and the dynamics),
         # offered only here: the one branch point from main's code path (every set without an accepted
         # hysteresis, or without exactly one searched map beside it, returns here unchanged)
-        if (len(have) == 1 and len(names_) >= 2 and "hysteresis" in st.current
+        if (len(have) == 1 and len(names_) >= 2 and input_loop(st.current)
                 and not _fixed(have[0], st.current[have[0]])):
             _after_hysteresis_side(ctx, st, have[0])
         return
@@ -309,7 +310,7 @@ def _after_hysteresis_side(ctx: _Context, st: _State, name: str) -> None:
         return
     alt_fit = alt.get("static_nonlinearity")
     why = ("its refinement dropped it" if alt_fit is None or not is_after_hysteresis(alt_fit.variant)
-           or "hysteresis" not in alt else
+           or not input_loop(alt) else
            "it came out a gain and an offset" if linear_static(pipe, alt) else
            # a load raising the resonance is no reason when the final set's does too (the backward check takes
            # such a load out of either: ``combos.py`` seed 21, combo_13)

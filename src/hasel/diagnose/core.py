@@ -67,6 +67,7 @@ from hasel.diagnose.significance import _alike, block_test, coloured_z
 from hasel.diagnose.wording import _evidence, unsettled_start_text
 from hasel.effects.drift import ABSORB, LEVEL_CARRIERS, TRAVEL, fit_level_forms
 from hasel.effects.evidence import magnitude_evidence
+from hasel.effects.hysteresis import is_output_loop
 from hasel.effects.registry import family
 from hasel.effects.saturation import is_stop
 from hasel.errors import BadInputError
@@ -530,8 +531,9 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     # and the interleaved held-out blocks, which share the wander with their training neighbours, credit it.
     # A map must then also improve the fast part (slow part over wander_zc_s removed) on its own
     t_fast = ctx.fast_block(st.e_ho, e_new)
-    # (an end stop on a recalibrated line is such a map of the output level too)
-    level_map = any(n in _MAP_SIDES or is_stop(eff_new[n]) for n in new_names)
+    # (an end stop on a recalibrated line is such a map of the output level too, and so is a loop of the stroke:
+    # a map of the output level with memory, which a wander the controller fought fits the same way)
+    level_map = any(n in _MAP_SIDES or is_stop(eff_new[n]) or is_output_loop(eff_new[n]) for n in new_names)
     slow_only = (opts.map_fast_t_min > 0 and level_map
                  and z_col < opts.zc_min and t_fast < opts.map_fast_t_min)
     held_out_ok = held_out_ok and not slow_only
@@ -606,7 +608,8 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
             "effect acts, would decide")})
     if slow_only:
         out.append({"gate": "slow_only", "why": (
-            f"a map whose gain is in the slow part of the residual only (fast-part block score {t_fast:.1f}, a map "
+            f"a map (or a loop of the stroke) whose gain is in the slow part of the residual only (fast-part block score "
+            f"{t_fast:.1f}, a map "
             f"needs {opts.map_fast_t_min:g}): a slow sensor offset wander or a drift gives that too; levels "
             "visited in another order, or a rest at zero between them, separate a map from a wander")})
     elif not opts.held_out_passes(t_blk, z_col):

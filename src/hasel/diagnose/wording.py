@@ -4,6 +4,7 @@ from __future__ import annotations
 from hasel.diagnose.augment import EffectFit, Pipeline
 from hasel.effects.asymmetric import INPUT as ASYM_INPUT
 from hasel.effects.drift import ABSORB
+from hasel.effects.hysteresis import OUTPUT as OUTPUT_HYST
 from hasel.effects.load import damping_factor, keeps_zeta, load_offset, mode_of, zero_form
 from hasel.effects.saturation import OUTPUT_SLEW, stop_limit
 
@@ -106,7 +107,10 @@ def _evidence(name: str, fit: EffectFit, where: dict, gain: float, runner_up: tu
                        f"{dr['rising_minus_falling']:+.3g}, {dr['rising_minus_falling_over_noise']:+.1f} x noise; "
                        f"direction adds {_pct(dr['extra_share'])} to the level's share; at equal input "
                        f"levels the input's direction adds {_pct(dr.get('input_direction_extra_share', 0.0))}) "
-                       f"and a rate-independent play-operator memory explains it"
+                       f"and a rate-independent play-operator memory "
+                       + ("of the stroke (after the dynamics: friction or backlash of the measured point or the "
+                          "sensor's mount, a stick-slip) explains it" if fit.variant == OUTPUT_HYST else
+                          "of the voltage (before the dynamics) explains it")
                        + (f", the log starting on the {'rising' if fit.theta[-1] < 0 else 'falling'} branch "
                           f"(c = {fit.theta[-1]:+.2f})" if len(fit.theta) > 5 and abs(fit.theta[-1]) > 0.05 else "")),
         "asymmetric_dynamics": lambda: (f"the residual depends on the direction (rising minus falling "

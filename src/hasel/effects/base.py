@@ -49,11 +49,12 @@ LINEAR = "_linear"
 #: delay, input clip or slew limit, input lag (``asymmetric_dynamics:input``), input map, hysteresis, map after
 #: the hysteresis (offered only beside an accepted hysteresis: ``static_nonlinearity:after_hysteresis``, 3.5),
 #: linear model with load, internal map,
-#: asymmetric lag or speed limit, drift, output clip, sensor map, measured clip.
+#: asymmetric lag or speed limit, hysteresis of the output (``hysteresis:output``), drift, output clip, sensor map,
+#: measured clip.
 SLOT_ORDER = {LINEAR: 4, "time_delay": 0, "saturation:input": 1, "saturation:slew": 1,
               "asymmetric_dynamics:input": 1.5, "static_nonlinearity:input": 2, "hysteresis": 3,
               "static_nonlinearity:after_hysteresis": 3.5, "load_mass": 4, "static_nonlinearity:internal": 5,
-              "asymmetric_dynamics": 6, "charge_drift": 7, "saturation:output": 8, "sensor_nonlinearity": 9,
+              "asymmetric_dynamics": 6, "hysteresis:output": 6.5, "charge_drift": 7, "saturation:output": 8, "sensor_nonlinearity": 9,
               "saturation:measured": 10}
 
 

@@ -10,7 +10,18 @@ Forms
   ``x_0 + c r_j`` (``c`` in [-1, 1]: the branch the log starts on)
   (:class:`PlayStage`).
 
-Both carry their memory between chunks exactly (a play operator's recursion is a
+- generic ``output`` (the same ``theta``): the same Prandtl-Ishlinskii law on the *stroke* after the
+  linear dynamics (and after an asymmetric lag), its half-widths the same fractions of the model output's
+  range (:func:`output_thresholds`): a memory of the mechanism or of the sensor's mount (friction of the
+  measured point, backlash, a stick-slip), which a step of the voltage passes through the dynamics first.
+  Fitted beside ``input`` (weights by non-negative least squares on the plays of the model output) and
+  taken in its place when its training error is lower and the held-out blocks prefer it
+  (:func:`hasel.effects.heldout.held_out_prefers`). Why: on one amplitude a loop of the stroke and a loop
+  of the voltage seen through P(s) differ in phase across the band; fitted as an input loop, an output
+  one left 0.5 of the gap (``forms3.py`` seed 1 #11, stick-slip) or gave way to a load form that slowed
+  the real poles (#33, an output Prandtl-Ishlinskii loop; session 32's h-real).
+
+All carry their memory between chunks exactly (a play operator's recursion is a
 clamp, and a composition of clamps is a clamp: bit for bit).
 """
 from __future__ import annotations
@@ -20,15 +31,37 @@ from typing import ClassVar
 
 import numpy as np
 
-from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _downstream_nonlinear, _fit_scalar, _ls, _refine
+from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
+from hasel.effects.fitkit import _downstream_nonlinear, _fit_scalar, _ls, _refine, _sse, _with
+from hasel.effects.heldout import held_out_prefers
 from hasel.effects.operators import BoucWen, monotone_runs, play
 from hasel.validate import in_range, positive
 
-__all__ = ["Hysteresis", "HYST_THRESHOLDS", "PlayStage", "BoucWenStage", "branch", "play_support", "HysteresisFamily", "FAMILY"]
+__all__ = ["Hysteresis", "HYST_THRESHOLDS", "OUTPUT", "output_thresholds", "input_loop", "is_output_loop", "PlayStage", "BoucWenStage", "branch", "play_support", "HysteresisFamily", "FAMILY"]
 
 #: Play-operator half-widths as fractions of the input's range (1st-99th percentile).
 HYST_THRESHOLDS = (0.01, 0.03, 0.07, 0.15, 0.3)
+#: variant of the loop of the stroke (after the dynamics)
+OUTPUT = "output"
+
+
+def input_loop(effects: dict) -> bool:
+    """Whether ``effects`` (name to :class:`EffectFit`) hold a hysteresis of the input (not of the output): what a
+    map of the hysteresis output, between it and the dynamics, needs."""
+    f = effects.get("hysteresis")
+    return f is not None and f.variant != OUTPUT
+
+
+def is_output_loop(f) -> bool:
+    """Whether the fit ``f`` (an :class:`EffectFit`) is a loop of the stroke: a map of the output level with
+    memory, which the diagnosis's slow-only test treats as it treats the maps."""
+    return f.name == "hysteresis" and f.variant == OUTPUT
+
+
+def output_thresholds(y_s: float) -> tuple[float, ...]:
+    """The ``output`` variant's play half-widths (output unit): :data:`HYST_THRESHOLDS` of the model output's
+    range ``2 y_s`` (``y_s`` its half-range, as the input's thresholds are of ``2 u_s``)."""
+    return tuple(2.0 * float(y_s) * f for f in HYST_THRESHOLDS)
 
 
 @dataclass(frozen=True)
@@ -156,13 +189,57 @@ def _fit_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFi
     return fit
 
 
+def _fit_output(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The ``output`` variant: weights by non-negative least squares on the plays of the model output before
+    the hysteresis (``y_asym``), per starting branch of the input variant's grid, the branch refined; ``None``
+    without two reversals of that output (a tenth of its range)."""
+    base = {k: v for k, v in effects.items() if k != "hysteresis"}
+    radii = output_thresholds(pipe.y_s)
+    outs = [pipe.stages(base, ri)["y_asym"] for ri in range(len(pipe.prep.records))]
+    if min(int(monotone_runs(play(y, 0.1 * pipe.y_s, float(y[0]))).size - 1)
+           for y, r in zip(outs, pipe.prep.records) if r.train.any()) < 2:
+        return None
+
+    def at(c: float) -> EffectFit:
+        def basis(ri, st):
+            y = st["y_asym"]
+            return [play(y, r, float(y[0]) + c * r) - y for r in radii]
+
+        th = _ls(pipe, base, basis, nonneg=True)
+        return EffectFit("hysteresis", OUTPUT, tuple(map(float, th)) + (float(c),))
+
+    fit = _fit_scalar(pipe, base, at, np.array([-1.0, -0.5, 0.0, 0.5, 1.0]), maxiter=6)
+    if fit is not None and _downstream_nonlinear(base, SLOT_ORDER["hysteresis:output"]):
+        lo, hi = FAMILY.bounds(pipe, fit)
+        fit = _refine(pipe, base, fit, lo, hi, max_nfev=25)
+    return fit
+
+
+def _fit_sides(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """The input variant, or the output one in its place when its training error is lower and the held-out
+    blocks prefer it (both have the same parameters)."""
+    inp = _fit_hysteresis(pipe, effects)
+    try:
+        out = _fit_output(pipe, effects)
+    except (ValueError, np.linalg.LinAlgError):
+        out = None
+    if out is None:
+        return inp
+    if inp is None:
+        return out
+    with_in, with_out = _with(effects, inp), _with(effects, out)
+    if _sse(pipe, with_out) < _sse(pipe, with_in) and held_out_prefers(pipe, with_in, with_out):
+        return out
+    return inp
+
+
 
 class HysteresisFamily(EffectFamily):
     """The ``hysteresis`` family (see the module's docstring)."""
 
     name = "hysteresis"
     slot = "input"
-    variants = ("input",)
+    variants = ("input", OUTPUT)
     truth_class = Hysteresis
 
     def param_names(self, fit: EffectFit) -> tuple[str, ...]:
@@ -171,8 +248,10 @@ class HysteresisFamily(EffectFamily):
         return names + (("branch",) if len(fit.theta) > len(HYST_THRESHOLDS) else ())
 
     def stage(self, fit: EffectFit, scales: Scales, dt_s: float) -> PlayStage:
-        """Plays on ``scales.thresholds``, starting on the fitted branch."""
-        return PlayStage(fit.theta[:len(HYST_THRESHOLDS)], scales.thresholds, branch(fit))
+        """Plays on ``scales.thresholds`` (``output``: :func:`output_thresholds` of ``scales.y_s``), starting on the
+        fitted branch."""
+        radii = output_thresholds(scales.y_s) if fit.variant == OUTPUT else scales.thresholds
+        return PlayStage(fit.theta[:len(HYST_THRESHOLDS)], radii, branch(fit))
 
     def truth_stage(self, effect: Effect, dt_s: float) -> BoucWenStage:
         """The Bouc-Wen element."""
@@ -181,8 +260,9 @@ class HysteresisFamily(EffectFamily):
 
     def fit(self, ctx: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
         """Non-negative weights by least squares per starting branch, the branch refined; ``None`` without
-        two reversals of the input."""
-        return _fit_hysteresis(ctx, effects)
+        two reversals of the input; the loop of the output in its place where it fits better
+        (:func:`_fit_sides`)."""
+        return _fit_sides(ctx, effects)
 
     def bounds(self, ctx: FitContext, fit: EffectFit) -> tuple[np.ndarray, np.ndarray]:
         """Weights >= 0, branch in [-1, 1]."""
@@ -199,15 +279,23 @@ class HysteresisFamily(EffectFamily):
 
     def describe(self, ctx: FitContext, fit: EffectFit, units: tuple[str, str],
                  effects: dict[str, EffectFit]) -> dict:
-        """Thresholds, weights, the loop's half-width (input unit) and the starting branch."""
+        """Thresholds, weights, the loop's half-width (input unit; ``output``: output unit) and the starting
+        branch."""
         th = fit.theta
-        return {"variant": fit.variant, "thresholds": list(ctx.thresholds), "weights": list(th[:len(HYST_THRESHOLDS)]),
-                "unit": units[0], "loop_half_width": float(sum(w * r for w, r in zip(th, ctx.thresholds))),
+        out = fit.variant == OUTPUT
+        radii = output_thresholds(ctx.y_s) if out else ctx.thresholds
+        return {"variant": fit.variant, "thresholds": list(radii), "weights": list(th[:len(HYST_THRESHOLDS)]),
+                "unit": units[1] if out else units[0],
+                "loop_half_width": float(sum(w * r for w, r in zip(th, radii))),
                 "initial_branch": branch(fit),
                 "initial_branch_note": "plays start at x0 + c*r: -1 rising branch, 0 centred, 1 falling branch"}
 
     def signature(self, ctx: FitContext, fit: EffectFit, effects: dict[str, EffectFit]) -> dict:
-        """What the training input could show of each play (:func:`play_support`)."""
+        """What the training input could show of each play (:func:`play_support`; ``output``: the measured output
+        on the output's thresholds)."""
+        if fit.variant == OUTPUT:
+            y = np.concatenate([r.y[r.train] for r in ctx.prep.records if r.train.any()])
+            return {"plays": play_support(y, output_thresholds(ctx.y_s), fit.theta[:len(HYST_THRESHOLDS)])}
         u = np.concatenate([r.u[r.train] for r in ctx.prep.records if r.train.any()])
         return {"plays": play_support(u, ctx.thresholds, fit.theta[:len(HYST_THRESHOLDS)])}
 

@@ -47,6 +47,7 @@ from scipy.special import expit
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
 from hasel.effects.fitkit import (STATIC_DEGREE, _downstream_nonlinear, _poly_ls, _refine, _sse, _with, bic_prefers,
                                   monomials, poly_map, sumsq)
+from hasel.effects.hysteresis import input_loop
 from hasel.errors import BadInputError
 from hasel.validate import in_range, positive
 
@@ -307,7 +308,7 @@ def fit_variant(pipe: FitContext, effects: dict[str, EffectFit], variant: str) -
     if th.size > 1 and _nearly_linear(pipe, base, variant, basis, th):
         th = _poly_ls(pipe, base, basis, degrees=(0,))
     fit = EffectFit("static_nonlinearity", variant, tuple(map(float, th)))
-    if _downstream_nonlinear(base, slot) or (variant == "input" and "hysteresis" in base):
+    if _downstream_nonlinear(base, slot) or (variant == "input" and input_loop(base)):
         fit = _refine(pipe, base, fit, -np.inf, np.inf, max_nfev=25)
     return fit
 
@@ -394,7 +395,7 @@ def fit_knee_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit]) -
     the training residual (exact with nothing nonlinear after the map, else a start); the best refined by
     nonlinear least squares (:data:`DEAD_REFINE_NFEV` evaluations, within :meth:`StaticMapFamily.bounds`).
     None without a hysteresis or where the input holds fewer than three levels."""
-    if "hysteresis" not in effects or getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
+    if not input_loop(effects) or getattr(pipe, "max_degree", STATIC_DEGREE) < 2:
         return None
     base = {k: v for k, v in effects.items() if k != "static_nonlinearity"}
     recs = [(ri, rec) for ri, rec in enumerate(pipe.prep.records) if rec.train.any()]
@@ -444,7 +445,7 @@ def fit_after_hysteresis(pipe: FitContext, effects: dict[str, EffectFit], form: 
     hysteresis output (degree by cross-validation, only the offset if nearly a line), refined where a nonlinear
     stage follows (:func:`fit_variant`); :data:`AFTER_HYST_KNEE`: the knee (:func:`fit_knee_after_hysteresis`);
     None: both, the one with the lower validation error kept (the samples the diagnosis compares sets on)."""
-    if "hysteresis" not in effects:
+    if not input_loop(effects):
         return None
     if form == AFTER_HYST_KNEE:
         return fit_knee_after_hysteresis(pipe, effects)
