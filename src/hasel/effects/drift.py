@@ -61,7 +61,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _ls, _sse, _with, bic_prefers, sumsq
+from hasel.effects.fitkit import _fit_or_none, _ls, _sse, _with, bic_prefers, sumsq
 from hasel.effects.heldout import held_out_prefers
 from hasel.validate import in_range, positive
 
@@ -623,17 +623,11 @@ def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit], swing_ok: 
     when not ``swing_ok``), and the two-tau form in its place when its three more parameters lower the training BIC
     (the family's selection habit, as the load's ``model:damp``)."""
     one = _fit_drift(pipe, effects)
-    try:
-        swing = _fit_travel(pipe, effects) if swing_ok else None
-    except (ValueError, np.linalg.LinAlgError):
-        swing = None
+    swing = _fit_or_none(_fit_travel, pipe, effects) if swing_ok else None
     if swing is not None and (one is None or (_sse(pipe, _with(effects, swing)) < _sse(pipe, _with(effects, one))
                                               and _held_out_prefers(pipe, _with(effects, one), _with(effects, swing)))):
         one = swing
-    try:
-        two = _fit_drift2(pipe, effects)
-    except (ValueError, np.linalg.LinAlgError):
-        two = None
+    two = _fit_or_none(_fit_drift2, pipe, effects)
     n = pipe.residuals(effects, "train").size
     cur = one
     if two is not None:
@@ -646,10 +640,7 @@ def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit], swing_ok: 
 def _absorb_or(pipe: FitContext, effects: dict[str, EffectFit], cur: EffectFit | None, n: int) -> EffectFit | None:
     """``output:absorb`` in place of the family's choice ``cur`` when its training BIC is lower (more parameters
     counted) and the held-out blocks prefer it; else ``cur``."""
-    try:
-        ab = _fit_absorb(pipe, effects)
-    except (ValueError, np.linalg.LinAlgError):
-        ab = None
+    ab = _fit_or_none(_fit_absorb, pipe, effects)
     if ab is None:
         return cur
     with_cur = _with(effects, cur) if cur is not None else effects

@@ -101,6 +101,15 @@ def _refine(pipe: Pipeline, effects: dict[str, EffectFit], fit: EffectFit, lo, h
     return cand if 2.0 * res.cost <= _sse(pipe, _with(effects, fit)) else fit
 
 
+def _fit_or_none(fitter, pipe: Pipeline, effects: dict[str, EffectFit]) -> EffectFit | None:
+    """``fitter(pipe, effects)``, or None where its least squares failed (a singular or ill-posed basis): a
+    family's alternative form that cannot be fitted is no candidate, not an error."""
+    try:
+        return fitter(pipe, effects)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+
+
 def bic_prefers(n: int, s_simple: float, s_rich: float, extra: int) -> bool:
     """Whether a fit with ``extra`` more parameters (training sum of squares ``s_rich``) has a lower BIC than
     the simpler one (``s_simple``) on ``n`` samples, noise variance unknown: ``n log(s_simple / s_rich) >

@@ -32,7 +32,7 @@ from typing import ClassVar
 import numpy as np
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _downstream_nonlinear, _fit_scalar, _ls, _refine, _sse, _with
+from hasel.effects.fitkit import _downstream_nonlinear, _fit_or_none, _fit_scalar, _ls, _refine, _sse, _with
 from hasel.effects.heldout import held_out_prefers
 from hasel.effects.operators import BoucWen, monotone_runs, play
 from hasel.validate import in_range, positive
@@ -219,10 +219,7 @@ def _fit_sides(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | N
     """The input variant, or the output one in its place when its training error is lower and the held-out
     blocks prefer it (both have the same parameters)."""
     inp = _fit_hysteresis(pipe, effects)
-    try:
-        out = _fit_output(pipe, effects)
-    except (ValueError, np.linalg.LinAlgError):
-        out = None
+    out = _fit_or_none(_fit_output, pipe, effects)
     if out is None:
         return inp
     if inp is None:
