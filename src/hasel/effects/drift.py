@@ -61,7 +61,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from hasel.effects.base import Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _fit_or_none, _ls, _sse, _with, bic_prefers, sumsq
+from hasel.effects.fitkit import _fit_or_none, _ls, _sse, _with, bic_prefers, prefer_rival, sumsq
 from hasel.effects.heldout import held_out_prefers
 from hasel.validate import in_range, positive
 
@@ -622,11 +622,9 @@ def _fit_drift_forms(pipe: FitContext, effects: dict[str, EffectFit], swing_ok: 
     """The one-tau form (of the level, or of the swing where that fits better, :func:`_fit_travel`; the level only
     when not ``swing_ok``), and the two-tau form in its place when its three more parameters lower the training BIC
     (the family's selection habit, as the load's ``model:damp``)."""
-    one = _fit_drift(pipe, effects)
-    swing = _fit_or_none(_fit_travel, pipe, effects) if swing_ok else None
-    if swing is not None and (one is None or (_sse(pipe, _with(effects, swing)) < _sse(pipe, _with(effects, one))
-                                              and _held_out_prefers(pipe, _with(effects, one), _with(effects, swing)))):
-        one = swing
+    # the held-out preference here is _held_out_prefers's (why the swing needs it: see there)
+    one = prefer_rival(pipe, effects, _fit_drift(pipe, effects),
+                       _fit_or_none(_fit_travel, pipe, effects) if swing_ok else None)
     two = _fit_or_none(_fit_drift2, pipe, effects)
     n = pipe.residuals(effects, "train").size
     cur = one

@@ -16,6 +16,7 @@ import numpy as np
 from scipy import optimize
 
 from hasel.effects.base import EffectFit, FitContext
+from hasel.effects.heldout import held_out_prefers
 
 __all__ = ["STATIC_DEGREE", "POLY_RIDGE", "sumsq", "sse", "with_fit", "refine", "ls", "poly_ls", "fit_scalar",
            "downstream_nonlinear", "monomial", "monomials", "poly_map", "train_smooth", "train_halves",
@@ -108,6 +109,22 @@ def _fit_or_none(fitter, pipe: Pipeline, effects: dict[str, EffectFit]) -> Effec
         return fitter(pipe, effects)
     except (ValueError, np.linalg.LinAlgError):
         return None
+
+
+def prefer_rival(pipe: Pipeline, effects: dict[str, EffectFit], cur: EffectFit | None,
+                 rival: EffectFit | None) -> EffectFit | None:
+    """``rival`` (a family's alternative form, same name) in place of ``cur`` when its training sum of squares is
+    lower and the held-out blocks prefer it (:func:`hasel.effects.heldout.held_out_prefers`); whichever exists when
+    the other is None. Why both: training error alone takes the form that fits noise, held-out alone a form that
+    does not explain the training data."""
+    if rival is None:
+        return cur
+    if cur is None:
+        return rival
+    with_cur, with_rival = _with(effects, cur), _with(effects, rival)
+    if _sse(pipe, with_rival) < _sse(pipe, with_cur) and held_out_prefers(pipe, with_cur, with_rival):
+        return rival
+    return cur
 
 
 def bic_prefers(n: int, s_simple: float, s_rich: float, extra: int) -> bool:

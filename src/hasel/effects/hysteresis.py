@@ -32,8 +32,7 @@ from typing import ClassVar
 import numpy as np
 
 from hasel.effects.base import SLOT_ORDER, Effect, EffectFamily, EffectFit, FitContext, Scales
-from hasel.effects.fitkit import _downstream_nonlinear, _fit_or_none, _fit_scalar, _ls, _refine, _sse, _with
-from hasel.effects.heldout import held_out_prefers
+from hasel.effects.fitkit import _downstream_nonlinear, _fit_or_none, _fit_scalar, _ls, _refine, prefer_rival
 from hasel.effects.operators import BoucWen, monotone_runs, play
 from hasel.validate import in_range, positive
 
@@ -218,16 +217,7 @@ def _fit_output(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | 
 def _fit_sides(pipe: FitContext, effects: dict[str, EffectFit]) -> EffectFit | None:
     """The input variant, or the output one in its place when its training error is lower and the held-out
     blocks prefer it (both have the same parameters)."""
-    inp = _fit_hysteresis(pipe, effects)
-    out = _fit_or_none(_fit_output, pipe, effects)
-    if out is None:
-        return inp
-    if inp is None:
-        return out
-    with_in, with_out = _with(effects, inp), _with(effects, out)
-    if _sse(pipe, with_out) < _sse(pipe, with_in) and held_out_prefers(pipe, with_in, with_out):
-        return out
-    return inp
+    return prefer_rival(pipe, effects, _fit_hysteresis(pipe, effects), _fit_or_none(_fit_output, pipe, effects))
 
 
 
