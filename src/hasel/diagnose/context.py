@@ -15,7 +15,7 @@ import numpy as np
 from hasel.diagnose.augment import FAMILIES, INPUT_SIDE, LINEAR, EffectFit, Pipeline, measured_clip
 from hasel.diagnose.options import DiagnoseOptions
 from hasel.diagnose.prep import Prepared
-from hasel.diagnose.significance import block_test, coloured_z
+from hasel.diagnose.significance import ar_whitener, block_test, coloured_z, whitened_scores
 from hasel.effects.heldout import block_labels
 from hasel.effects.load import mode_of, zero_form
 from hasel.errors import BadInputError
@@ -107,6 +107,17 @@ class _Context:
         """The held-out block score of ``e_old -> e_new`` on their fast parts: both residuals lose their slow
         part (a moving average over ``opts.wander_zc_s``, as :func:`coloured_z`) first."""
         return block_test(e_old, e_new, self.labels_va, self.slow_zc)
+
+    def whitened(self, e_old: np.ndarray, e_new: np.ndarray, eff_old: dict) -> tuple[float, float, int]:
+        """Block score and z of ``e_old -> e_new`` on residuals whitened by an AR model of the training residual
+        of ``eff_old`` (the selection before the candidate: under the null it is the noise; the candidate's own
+        residual would have lost what it predicts of the noise) (:func:`ar_whitener`, :func:`whitened_scores`),
+        and the AR order."""
+        e_tr = self.pipe.residuals(eff_old, "train")
+        lab_tr = block_labels(self.prep, "train")
+        a = ar_whitener(e_tr, lab_tr, max(1, min(30, self.lag_va // 3)))
+        t, z = whitened_scores(e_old, e_new, self.labels_va, a)
+        return t, z, a.size - 1
 
     def held_out(self, e_old: np.ndarray, e_new: np.ndarray) -> tuple[float, float]:
         """The two held-out scores of ``e_old -> e_new``: block score and coloured-noise z."""

@@ -524,6 +524,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all) or (
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
+    t_w, z_w, p_w = ctx.whitened(st.e_ho, e_new, st.current)
     held_out_ok = opts.held_out_passes(t_blk, z_col)
     new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
     # a map (static or sensor) says the output error depends on the level; slow sensor wander depends on time,
@@ -560,12 +561,14 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
                           "z": z, "t_block": t_blk, "z_coloured": z_col, "delta_bic": dbic,
                           "over_floor": over_floor, "nominal_gap_nrmse": gap_nrmse, "t_block_fast": t_fast,
                           "slow_only": bool(slow_only),
+                          "t_block_white": t_w, "z_white": z_w, "ar_order": p_w,
                           "accepted": bool(ok)}
                          | ({"magnitude_evidence": magnitude} if magnitude is not None else {})
                          | ({"failed": failed} if failed else {}))
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
             f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g}"
+            f", whitened (AR {p_w}) block {t_w:.1f} z {z_w:.1f}"
             + (f", fast-part block score {t_fast:.1f} (a map needs {opts.map_fast_t_min:g}: slow co-variation only)"
                if slow_only else "") + f" -> {'accepted' if ok else 'rejected'}"
             + ("" if ok else f" ({', '.join(g['gate'] for g in failed)})"))

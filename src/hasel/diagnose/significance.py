@@ -103,3 +103,69 @@ def _alike(results: list[tuple], eff_new: dict, e_new: np.ndarray, mse_ho: float
                 "experiment": _SEPARATING.get(key, "another band, another rate or another amplitude, where the two "
                                                    "explanations predict different outputs")}
     return None
+
+
+def ar_whitener(e: np.ndarray, labels: np.ndarray, max_order: int) -> np.ndarray:
+    """Coefficients ``a`` (``a[0] = 1``) of the prediction-error filter ``A(q)`` of an AR model of ``e``.
+
+    The autocovariance is summed within the blocks of ``labels`` only (stacked blocks are not
+    neighbours in time); the order (at most ``max_order``) is the one of least AIC along the
+    Levinson-Durbin recursion. ``A(q) e`` is then close to white: what ``e``'s own past predicts is gone.
+    """
+    e = e - e.mean()
+    n = e.size
+    p_max = int(max(0, min(max_order, n // 10)))
+    if p_max == 0 or n == 0:
+        return np.ones(1)
+    r = np.zeros(p_max + 1)
+    cuts = np.flatnonzero(np.diff(labels)) + 1
+    for seg in np.split(e, cuts):
+        m = seg.size
+        for k in range(min(p_max + 1, m)):
+            r[k] += float(np.dot(seg[:m - k], seg[k:]))
+    r /= n
+    if r[0] <= 0:
+        return np.ones(1)
+    a, v = np.ones(1), r[0]
+    best_a, best_aic = a.copy(), n * math.log(v)
+    for k in range(1, p_max + 1):
+        refl = -(r[k] + float(np.dot(a[1:], r[k - 1:0:-1]))) / v
+        a = np.concatenate([a, [0.0]])
+        a = a + refl * a[::-1]
+        v *= 1.0 - refl * refl
+        if v <= 0:
+            break
+        aic = n * math.log(v) + 2 * k
+        if aic < best_aic:
+            best_a, best_aic = a.copy(), aic
+    return best_a
+
+
+def whitened_scores(e_old: np.ndarray, e_new: np.ndarray, labels: np.ndarray, a: np.ndarray) -> tuple[float, float]:
+    """Block score and white-noise z of ``e_old -> e_new`` after both pass the whitening filter ``a``.
+
+    Each held-out block is filtered on its own and loses its first ``len(a) - 1`` samples (the
+    filter's start-up). Under the null the whitened residual's sample at ``t`` is the noise's
+    innovation, which no function of earlier inputs predicts: a fit that predicts coloured noise
+    through a feedback loop (the applied voltage carries the controller's reaction to past noise)
+    earns nothing here, where the plain scores credit it.
+    """
+    from scipy.signal import lfilter
+
+    p = a.size - 1
+    cuts = np.flatnonzero(np.diff(labels)) + 1
+    wo, wn, lab = [], [], []
+    for i, (so, sn) in enumerate(zip(np.split(e_old, cuts), np.split(e_new, cuts))):
+        if so.size <= p + 1:
+            continue
+        wo.append(lfilter(a, [1.0], so)[p:])
+        wn.append(lfilter(a, [1.0], sn)[p:])
+        lab.append(np.full(so.size - p, i))
+    if not wo:
+        return 0.0, 0.0
+    w_old, w_new, lab_w = np.concatenate(wo), np.concatenate(wn), np.unique(np.concatenate(lab), return_inverse=True)[1]
+    t = block_test(w_old, w_new, lab_w, 0)
+    d = w_old - w_new
+    s2 = float(np.mean(w_new ** 2))
+    z = float(np.sum(w_old ** 2 - w_new ** 2) / (2.0 * math.sqrt(max(s2, 1e-300)) * max(float(np.linalg.norm(d)), 1e-300)))
+    return t, z
