@@ -554,7 +554,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
                           gap_need=need if far else opts.min_gap_share, big_enough=big_enough,
                           nominal_share=nominal_share, over_floor=over_floor, first=rnd == 0,
                           t_blk=t_blk, z_col=z_col, slow_only=bool(slow_only), t_fast=t_fast, dbic=dbic,
-                          gap_nrmse=gap_nrmse)
+                          gap_nrmse=gap_nrmse, t_white=t_w, z_white=z_w, ar_order=p_w)
     ok = not failed
     label_new = " + ".join(k for k in eff_new if k != LINEAR)
     st.rounds[-1].update({"best": label_new, "gain": gain, "gap_share": gap_share, "nominal_gap_share": nominal_share,
@@ -577,12 +577,14 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
 
 def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: float, gap_need: float,
                  big_enough: bool, nominal_share: float, over_floor: float, first: bool, t_blk: float, z_col: float,
-                 slow_only: bool, t_fast: float, dbic: float, gap_nrmse: float = math.inf) -> list[dict]:
+                 slow_only: bool, t_fast: float, dbic: float, gap_nrmse: float = math.inf,
+                 t_white: float = math.inf, z_white: float = math.inf, ar_order: int = 0) -> list[dict]:
     """The acceptance gates a round's best candidate failed (:func:`_acceptance`: accepted when there is none), each as ``gate`` (a key:
     ``gain``, ``gap_share``, ``nominal_share``, ``near_floor``, ``practical_size``, ``held_out``, ``slow_only``, ``bic``) and
     ``why`` (one line in words, with the figures and what each gate needs). Shares are fractions of the validation
     residual energy; ``over_floor`` is that energy over the noise floor's; ``gap_nrmse`` is the systematic part of the
-    validation error (its energy above the floor's) as an NRMSE."""
+    validation error (its energy above the floor's) as an NRMSE; ``t_white`` and ``z_white`` are the held-out scores
+    on residuals whitened by the noise's AR model of order ``ar_order`` (:meth:`_Context.whitened`; ``whitened``)."""
     out = []
     # each gate is the negation of its pass condition, so a NaN figure fails it
     if not gain >= need:
@@ -619,9 +621,25 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
         out.append({"gate": "held_out", "why": (
             f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
             f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
+    elif first and opts.whitened_test and not _whitened_passes(opts, t_blk, t_white, z_white):
+        out.append({"gate": "whitened", "why": (
+            f"its held-out gain is what the noise's own past predicts: on residuals whitened by the noise's AR model "
+            f"(order {ar_order}) the block score is {t_white:.1f} and the z {z_white:.1f} (needs "
+            + (f"{opts.white_min:g}" if t_blk >= opts.t_min else f"{opts.t_min:g} or {opts.zc_min:g}")
+            + "); coloured noise fed back through a controller into the voltage gives that; an open-loop log, "
+            "or a reference independent of the noise and a longer log, would decide")})
     if not dbic < 0:
         out.append({"gate": "bic", "why": "the training BIC does not prefer its extra parameters"})
     return out
+
+
+def _whitened_passes(opts: DiagnoseOptions, t_blk: float, t_white: float, z_white: float) -> bool:
+    """The whitened held-out test of a first effect (:attr:`DiagnoseOptions.whitened_test`): where the plain block
+    score passed, either whitened score reaches ``white_min`` (the gain is not what the noise's past predicts);
+    where only the coloured-noise z passed, the whitened scores pass the held-out test itself."""
+    if t_blk >= opts.t_min:
+        return max(t_white, z_white) >= opts.white_min
+    return opts.held_out_passes(t_white, z_white)
 
 
 def _adopt_candidate(ctx: _Context, st: _State, results: list[Candidate], best: Candidate, gain: float) -> None:
