@@ -49,7 +49,8 @@ def test_feedback_noise_fit_is_credited_raw_but_not_whitened():
     e_old, e_new = v[valid], v[valid] - lags[valid] @ coef
     lab_va = np.unique(lab[valid], return_inverse=True)[1]
     assert coloured_z(e_old, e_new, 100) > 3.5  # the plain z credits the noise fit
-    # the whitener of the residual before the fit (the current model's): under the null that is the noise
+    # with the noise's own whitener the fit earns nothing (the diagnosis estimates it from the candidate's training
+    # residual: a candidate as flexible as this FIR could whiten its own residual, a hysteresis or a map cannot)
     a = ar_whitener(v[train], lab[train], 30)
     t_w, z_w = whitened_scores(e_old, e_new, lab_va, a)
     assert z_w < 0.0 and t_w < 0.0

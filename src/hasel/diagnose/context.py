@@ -108,12 +108,12 @@ class _Context:
         part (a moving average over ``opts.wander_zc_s``, as :func:`coloured_z`) first."""
         return block_test(e_old, e_new, self.labels_va, self.slow_zc)
 
-    def whitened(self, e_old: np.ndarray, e_new: np.ndarray, eff_old: dict) -> tuple[float, float, int]:
+    def whitened(self, e_old: np.ndarray, e_new: np.ndarray, eff_new: dict) -> tuple[float, float, int]:
         """Block score and z of ``e_old -> e_new`` on residuals whitened by an AR model of the training residual
-        of ``eff_old`` (the selection before the candidate: under the null it is the noise; the candidate's own
-        residual would have lost what it predicts of the noise) (:func:`ar_whitener`, :func:`whitened_scores`),
-        and the AR order."""
-        e_tr = self.pipe.residuals(eff_old, "train")
+        of ``eff_new`` (the candidate: where it is right, what is left is the noise; the residual before it would
+        hold the effect, and its AR model would whiten the effect away) (:func:`ar_whitener`,
+        :func:`whitened_scores`), and the AR order."""
+        e_tr = self.pipe.residuals(eff_new, "train")
         lab_tr = block_labels(self.prep, "train")
         a = ar_whitener(e_tr, lab_tr, max(1, min(30, self.lag_va // 3)))
         t, z = whitened_scores(e_old, e_new, self.labels_va, a)

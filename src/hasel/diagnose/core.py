@@ -524,7 +524,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
         gain >= opts.near_all_gain and nominal_share >= opts.min_nominal_share_near_all) or (
         rnd > 0 and over_floor >= opts.relevant_over_floor)
     t_blk, z_col = ctx.held_out(st.e_ho, e_new)
-    t_w, z_w, p_w = ctx.whitened(st.e_ho, e_new, st.current)
+    t_w, z_w, p_w = ctx.whitened(st.e_ho, e_new, eff_new)
     held_out_ok = opts.held_out_passes(t_blk, z_col)
     new_names = [n for n in eff_new if n not in st.current and n != LINEAR]
     # a map (static or sensor) says the output error depends on the level; slow sensor wander depends on time,
