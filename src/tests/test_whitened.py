@@ -69,3 +69,21 @@ def test_a_real_effect_survives_whitening():
     t_w, z_w = whitened_scores(e_old[valid], v[valid], lab_va, a)
     assert z_w > 5.0 and t_w > 3.9
     assert z_w > coloured_z(e_old[valid], v[valid], 100)  # the efficient (GLS) form of the test
+
+
+def test_the_whitened_gate_holds_the_first_effect_only():
+    from hasel.diagnose import DiagnoseOptions
+    from hasel.diagnose.core import failed_gates
+
+    passing = dict(gain=0.5, need=0.05, gap_share=0.6, gap_need=0.2, big_enough=True, nominal_share=0.5,
+                   over_floor=40.0, t_blk=2.5, z_col=4.3, slow_only=False, t_fast=3.0, dbic=-100.0,
+                   gap_nrmse=0.05)
+    # free_indep 131 #33 (closed loop, pink noise): passed on the coloured z, whitened block 0.6, z 1.4
+    noise_fit = failed_gates(DiagnoseOptions(), first=True, t_white=0.6, z_white=1.4, ar_order=13, **passing)
+    assert [g["gate"] for g in noise_fit] == ["whitened"]
+    assert "AR model (order 13)" in noise_fit[0]["why"] and "0.6" in noise_fit[0]["why"]
+    # a later round is not gated (its residual holds the effects still unnamed), nor is the first when switched off
+    assert failed_gates(DiagnoseOptions(), first=False, t_white=0.6, z_white=1.4, **passing) == []
+    assert failed_gates(DiagnoseOptions(whitened_test=False), first=True, t_white=0.6, z_white=1.4, **passing) == []
+    # either whitened score at the held-out test's own threshold passes
+    assert failed_gates(DiagnoseOptions(), first=True, t_white=0.6, z_white=3.6, **passing) == []

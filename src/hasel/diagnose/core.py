@@ -621,25 +621,15 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
         out.append({"gate": "held_out", "why": (
             f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
             f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
-    elif first and opts.whitened_test and not _whitened_passes(opts, t_blk, t_white, z_white):
+    elif first and opts.whitened_test and not opts.held_out_passes(t_white, z_white):
         out.append({"gate": "whitened", "why": (
             f"its held-out gain is what the noise's own past predicts: on residuals whitened by the noise's AR model "
-            f"(order {ar_order}) the block score is {t_white:.1f} and the z {z_white:.1f} (needs "
-            + (f"{opts.white_min:g}" if t_blk >= opts.t_min else f"{opts.t_min:g} or {opts.zc_min:g}")
-            + "); coloured noise fed back through a controller into the voltage gives that; an open-loop log, "
+            f"(order {ar_order}) the block score is {t_white:.1f} and the z {z_white:.1f} (needs {opts.t_min:g} or "
+            f"{opts.zc_min:g}); coloured noise fed back through a controller into the voltage gives that; an open-loop log, "
             "or a reference independent of the noise and a longer log, would decide")})
     if not dbic < 0:
         out.append({"gate": "bic", "why": "the training BIC does not prefer its extra parameters"})
     return out
-
-
-def _whitened_passes(opts: DiagnoseOptions, t_blk: float, t_white: float, z_white: float) -> bool:
-    """The whitened held-out test of a first effect (:attr:`DiagnoseOptions.whitened_test`): where the plain block
-    score passed, either whitened score reaches ``white_min`` (the gain is not what the noise's past predicts);
-    where only the coloured-noise z passed, the whitened scores pass the held-out test itself."""
-    if t_blk >= opts.t_min:
-        return max(t_white, z_white) >= opts.white_min
-    return opts.held_out_passes(t_white, z_white)
 
 
 def _adopt_candidate(ctx: _Context, st: _State, results: list[Candidate], best: Candidate, gain: float) -> None:

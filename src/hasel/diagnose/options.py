@@ -278,20 +278,16 @@ class DiagnoseOptions:
         tuning runs (free_indep 11-13, ``cases.py`` seed 7, ``maps.py`` seed 41, ``free_noise.py`` seed 3) fell
         between 1.0 and 1.645, so those results are the same at either value (``bench/tune_diag/RESULT-h-free2.md``).
     whitened_test : bool
-        The first effect must also pass a held-out test on residuals whitened by an AR model of the nominal
-        model's training residual (under the null it is the noise: its own colour; order by AIC up to a third of
-        a validation block, at most 30; :meth:`_Context.whitened`). In closed loop the applied voltage carries the
-        controller's reaction to past noise, so any flexible function of it predicts coloured noise, on held-out
-        blocks as well; once whitened, what is left of the noise at each sample is its innovation, which nothing
-        earlier predicts. A first effect that passed on the block score must reach ``white_min`` on either
-        whitened score; one that passed on the coloured-noise z alone must pass ``t_min`` / ``zc_min`` whitened.
-        Later rounds are not tested: there the residual before the candidate holds the effects still unnamed,
-        and its AR model whitens them away (true members of pairs and triples scored -1.7 to 1.6 whitened).
-        [tuned, a study on seen logs: ``bench/tune_diag/RESULT-h-white.md``]
-    white_min : float
-        The whitened score a first effect that passed on the block score must reach (either one): the one-sided
-        5 % level, "not contradicted" [design; on the seen logs closed-loop noise fits scored -3.3 to 1.5, true
-        first effects 2.3 and more].
+        The first effect must pass the held-out test (``t_min`` or ``zc_min``, the same thresholds) also on
+        residuals whitened by an AR model of the candidate's own training residual (where the candidate is right
+        that is the noise; order by AIC up to a third of a validation block, at most 30;
+        :meth:`_Context.whitened`). In closed loop the applied voltage carries the controller's reaction to past
+        noise, so a flexible function of it predicts coloured noise, on held-out blocks as well; once whitened,
+        what is left of the noise at each sample is its innovation, which nothing earlier predicts, and a real
+        effect loses nothing (the whitened z is the efficient, generalised-least-squares form of the test). Later
+        rounds are not tested: there the candidate's residual still holds the effects not yet named, whose colour
+        the AR model takes for the noise's (true members of pairs and triples scored 0.2-2.9 whitened). [tuned, a
+        study on seen logs: ``bench/tune_diag/RESULT-h-white.md``]
     """
 
     max_effects: int = 3
@@ -350,7 +346,6 @@ class DiagnoseOptions:
     progress: Callable[[str], None] | None = None
     map_fast_t_min: float = 1.0
     whitened_test: bool = True
-    white_min: float = 1.645
 
     def held_out_passes(self, t_block: float, z_coloured: float) -> bool:
         """The held-out test: the block score reaches ``t_min`` or the coloured-noise z reaches ``zc_min``
