@@ -87,6 +87,10 @@ def test_the_whitened_gate_holds_the_first_effect_only():
     assert failed_gates(DiagnoseOptions(whitened_test=False), first=True, t_white=0.6, z_white=1.4, **passing) == []
     # either whitened score at the held-out test's own threshold passes
     assert failed_gates(DiagnoseOptions(), first=True, t_white=0.6, z_white=3.6, **passing) == []
+    # nor a candidate whose residual is mostly model error (forms3 seed 1 #20: an open-loop lag on white noise,
+    # 250x the floor's energy after it; whitened 2.3 / 2.8)
+    assert failed_gates(DiagnoseOptions(), first=True, t_white=2.3, z_white=2.8,
+                        **(passing | dict(over_floor=560.0, gain=0.55))) == []
     # a pass on the block score is not asked for it (forms3 seed 11 #28: a true closed-loop lag beside an unnamed
     # load, block score 6.8, whitened 1.4 / 1.7)
     assert failed_gates(DiagnoseOptions(), first=True, t_white=1.4, z_white=1.7, **(passing | dict(t_blk=6.8))) == []

@@ -621,7 +621,8 @@ def failed_gates(opts: DiagnoseOptions, *, gain: float, need: float, gap_share: 
         out.append({"gate": "held_out", "why": (
             f"the held-out test does not confirm it (block score {t_blk:.1f}, needs {opts.t_min:g}; coloured-noise z "
             f"{z_col:.1f}, needs {opts.zc_min:g}): a longer log, or more excitation where it acts, would decide")})
-    elif first and opts.whitened_test and t_blk < opts.t_min and not opts.held_out_passes(t_white, z_white):
+    elif (first and opts.whitened_test and t_blk < opts.t_min
+          and over_floor * (1.0 - gain) <= opts.white_over_floor_max and not opts.held_out_passes(t_white, z_white)):
         out.append({"gate": "whitened", "why": (
             f"its held-out gain is what the noise's own past predicts: on residuals whitened by the noise's AR model "
             f"(order {ar_order}) the block score is {t_white:.1f} and the z {z_white:.1f} (needs {opts.t_min:g} or "

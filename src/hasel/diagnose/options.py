@@ -289,8 +289,14 @@ class DiagnoseOptions:
         the test). Not asked of a block-score pass nor of later rounds: where the candidate's residual still
         holds an effect not yet named, the AR model takes that effect's colour for the noise's and whitens the
         candidate away too (a true closed-loop asymmetric lag beside an unnamed load scored 1.4 / 1.7 whitened
-        after a block score of 6.8; true members of pairs and triples in later rounds 0.2-2.9). [tuned, a study on
+        after a block score of 6.8; true members of pairs and triples in later rounds 0.2-2.9). Nor where the
+        candidate's validation error is more than ``white_over_floor_max`` times the noise floor's energy: that
+        residual is mostly model error, whose colour the AR model would take for the noise's. [tuned, a study on
         seen logs: ``bench/tune_diag/RESULT-h-white.md``]
+    white_over_floor_max : float
+        The whitened test is asked only where the candidate's validation error is at most this many times the
+        noise floor's energy [tuned, seen logs]: the false alarms it refused stood 1.8-41x (the spectral floor is
+        low under AR(1) noise), a true open-loop lag on white noise that it refused (forms3 seed 1 #20) 250x.
     """
 
     max_effects: int = 3
@@ -349,6 +355,7 @@ class DiagnoseOptions:
     progress: Callable[[str], None] | None = None
     map_fast_t_min: float = 1.0
     whitened_test: bool = True
+    white_over_floor_max: float = 100.0
 
     def held_out_passes(self, t_block: float, z_coloured: float) -> bool:
         """The held-out test: the block score reaches ``t_min`` or the coloured-noise z reaches ``zc_min``
