@@ -78,7 +78,8 @@ class DiagnoseOptions:
         the same logs before and after h-zboth2; session 33's 5 of 370 on free_indep 117-126, forms3 10 and
         multi2 34, main's side of h-absorb's decision (the same logs named with the branch), and session 34's 6 of 370 on
         free_indep 127-136, forms3 11 and multi2 35, the same logs before and after h-absorb2; session 35's 4 of 370 on
-        free_indep 137-146, forms3 12 and multi2 36, the same logs before and after h-hout2; in all 53 of 3690; session 30's
+        free_indep 137-146, forms3 12 and multi2 36, the same logs before and after h-hout2; session 36's 8 of 730 on
+        free_indep 147-166, forms3 13 and multi2 37 with h-white (13 without); in all 61 of 4420; session 30's
         13 of 730, free_indep
         seeds 47-66 on its final code, after ``min_gap_nrmse`` was decided on seeds 37-46, where it named 2 of
         360; session 31's 8 of 370, free_indep seeds 67-76 and fresh multi2 / forms3 seeds, the same names before
@@ -314,10 +315,10 @@ class DiagnoseOptions:
                              "effect-free logs (bench/tune_diag: many designs; white, coloured and quantised noise, "
                              "sensor wander; 100 Hz-10 kHz; ZOH, FOH, centred, fractional offsets) and changes the "
                              "output by at least 0.3 % of its spread. On effect-free logs no choice had seen it names "
-                             "an effect on 53 of 3690 (1.4 %, 95 % upper bound 1.9 %: a hundred fresh seeds of that "
-                             "generator 52 of 3600, fresh multi2 and forms3 seeds 1 of 90; sessions 30-35), and on the "
+                             "an effect on 61 of 4420 (1.4 %, 95 % upper bound 1.8 %: 120 fresh seeds of that "
+                             "generator 60 of 4320, fresh multi2 and forms3 seeds 1 of 100; sessions 30-36), and on the "
                              "independent verification corpora on 2 of 20 and 1 of 22. Those named: closed-loop sensor "
-                             "noise (wander, AR(1), random walk) as a hysteresis or a map (30 of the 53), open-loop "
+                             "noise (wander, AR(1), random walk) as a hysteresis or a map (33 of the 61), open-loop "
                              "sensor wander, walk or AR(1) noise as a static map or a drift, noise on the measured "
                              "voltage as a static map; a single named effect with a "
                              "small shrink on a log like these may be noise")
