@@ -566,7 +566,9 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
                          | ({"magnitude_evidence": magnitude} if magnitude is not None else {})
                          | ({"failed": failed} if failed else {}))
     ctx.say(f"round {rnd + 1}: best {label_new}: removes {100 * gain:.1f} % (above floor {100 * gap_share:.0f} %, "
-            f"of the nominal gap {100 * nominal_share:.0f} %), held-out block score {t_blk:.1f} "
+            + (f"of the nominal gap {100 * nominal_share:.0f} %)" if st.mse_nom > sigma2
+               else "the nominal at the floor)")
+            + f", held-out block score {t_blk:.1f} "
             f"(needs {opts.t_min:g}) or coloured-noise z {z_col:.1f} (needs {opts.zc_min:g}), dBIC {dbic:.3g}"
             f", whitened (AR {p_w}) block {t_w:.1f} z {z_w:.1f}"
             + (f", fast-part block score {t_fast:.1f} (a map needs {opts.map_fast_t_min:g}: slow co-variation only)"
@@ -967,7 +969,7 @@ def diagnose(t_s: np.ndarray, u: np.ndarray, y: np.ndarray, *, model=None, heldo
 
     if prep.stacked("y", "valid").size < 10 or prep.stacked("y", "hold").size < 10:
         raise BadInputError("too little held-out data to score a model")
-    sigma2, method, noise_d, where, arrays = _noise_stage(prep, pipe, clips)
+    sigma2, method, noise_d, where, arrays = _noise_stage(prep, pipe, clips, say, opts.input_noise_check)
     ctx = _Context.build(prep, pipe, opts, say, source, den, sigma2, method, model is None)
     say(f"noise floor: rms {math.sqrt(sigma2):.3g} ({method}), NRMSE {ctx.floor:.4f}")
     st = _start_state(ctx)

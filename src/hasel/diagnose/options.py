@@ -247,6 +247,12 @@ class DiagnoseOptions:
         block test prefers neither by ``t_min`` (:func:`_map_side_stage`) [design: no new threshold;
         checked on ``bench/tune_diag/maps.py`` seed 41, input maps beside delays, drifts, loads,
         hystereses and saturations, and sensor curves beside them as controls].
+    input_noise_check : bool
+        The recorded input's measurement noise through the model is added to the noise floor where the
+        nominal residual shows it (:mod:`hasel.diagnose.inputnoise`: the input's own difference noise and the
+        residual's cross-correlation with it must agree) [seen free_indep 127-146: the ``vnoise`` form named a
+        static map on PRBS at 200 Hz with 19 and 37 V rms, a function of the noisy voltage removing part of
+        the noise it put in the simulation; the check's thresholds are in that module].
     identify : {"auto", "internal", "ident"}
         Without a model: ``hasel.ident`` if available ("auto") or required ("ident"),
         else the internal output-error fit [design: "auto" keeps the one whose simulation
@@ -346,6 +352,7 @@ class DiagnoseOptions:
     load_adds_mass: bool = True
     load_magnitude_evidence: bool = True
     map_side_check: bool = True
+    input_noise_check: bool = True
     later_joint: int = 2
     joint_refine_nfev: int = 12
     identify: str = "auto"

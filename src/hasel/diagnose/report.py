@@ -46,6 +46,13 @@ def verdict_lines(v, units: tuple[str, str] = ("", "")) -> list[str]:
                      f"an output lag of {1e3 * lag['tau_rising_s']:.3g} / {1e3 * lag['tau_falling_s']:.3g} ms "
                      f"(rising / falling), under one sample, is this offset and is not named")
     lines += [unsettled_start_text(n, units[0]) for n in h.get("unsettled_start") or []]
+    inp = (getattr(v, "noise", {}) or {}).get("input_noise") or {}
+    if inp.get("counted") and inp.get("floor_add", 0.0) > 0.0:
+        # errors in variables: without this line a reader sees a floor above the output sensor's noise
+        amp = f"{1e3 * inp['sigma_u']:.3g} V" if units[0] in ("", "kV") else f"{inp['sigma_u']:.3g} {units[0]}"
+        lines.append(f"noise on the recorded input: {amp} rms measurement noise (its share "
+                     f"in the residual {inp['share']:.2g}, t {inp['t']:.3g}); through the model "
+                     f"{math.sqrt(inp['residual_var']):.3g} {units[1]} rms, counted in the noise floor")
     test = getattr(v, "test", {}) or {}
     over = h["nrmse_nominal"] / floor if floor > 0 else float("inf")
     if not v.effects:

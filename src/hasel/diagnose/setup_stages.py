@@ -17,6 +17,7 @@ import numpy as np
 from scipy import optimize
 
 from hasel.diagnose.augment import Pipeline
+from hasel.diagnose.inputnoise import InputNoise, input_noise
 from hasel.diagnose.nominal import scale_check
 from hasel.diagnose.options import DiagnoseOptions, DiagnosisFailed
 from hasel.diagnose.prep import Prepared, estimate_noise, flat_extremes, noise_trust, zoh_offset
@@ -349,14 +350,45 @@ def _gain_stage(prep: Prepared, num: np.ndarray, den: np.ndarray, delay_s: float
     return g
 
 
-def _noise_stage(prep: Prepared, pipe: Pipeline, clips: dict) -> tuple[float, str, dict, dict, dict]:
+def _input_noise_stage(prep: Prepared, pipe: Pipeline, r0: np.ndarray) -> InputNoise:
+    """The recorded input's measurement noise and its share of the nominal residual ``r0`` of the first record
+    (:func:`hasel.diagnose.inputnoise.input_noise`), with the nominal model's working-rate impulse response."""
+    u = pipe.inputs[0]
+    n = min(u.size, 8192)
+    imp = np.zeros(n + 1)
+    imp[1] = 1.0
+    h = pipe.nominal.run(imp)[1:]
+
+    def floor_view(sigma_u: float) -> float:
+        # the floor's estimator on the model's response to white noise: what it already counts (fixed seed, so a
+        # diagnosis is repeatable)
+        x = np.random.default_rng(0).standard_normal(u.size) * sigma_u
+        return estimate_noise(pipe.nominal.run(x), prep.rate_hz, prep.f_excited_hz)[0]
+
+    return input_noise(u, r0, h, floor_view)
+
+
+def _noise_stage(prep: Prepared, pipe: Pipeline, clips: dict, say=lambda _m: None,
+                 check_input: bool = True) -> tuple[float, str, dict, dict, dict]:
     """Stage: the noise variance from the nominal residual (``sigma2``, output units squared), its
-    estimator, how far to trust it, and the residual's localisation.
+    estimator, how far to trust it, and the residual's localisation. With ``check_input``, the recorded
+    input's measurement noise through the model is added where the residual shows it
+    (:mod:`hasel.diagnose.inputnoise`).
 
     Returns ``sigma2, method, noise, where, arrays``."""
     r0 = prep.records[0].y - pipe.simulate({}, 0)
     sigma2, method = estimate_noise(r0, prep.rate_hz, prep.f_excited_hz)
     noise_d = noise_trust(r0, prep.rate_hz, prep.f_excited_hz, sigma2, method)
+    if check_input:
+        inp = _input_noise_stage(prep, pipe, r0)
+        noise_d["input_noise"] = inp.as_dict()
+        if inp.counted and inp.floor_add > 0.0:
+            say(f"recorded input noise: {1e3 * inp.sigma_u:.3g} V rms (differences of order {inp.order}); "
+                f"{inp.reason}: its {math.sqrt(inp.residual_var):.3g} rms through the model added to the floor "
+                f"(rms {math.sqrt(sigma2):.3g} -> {math.sqrt(sigma2 + inp.floor_add):.3g})")
+            sigma2 += inp.floor_add
+            noise_d["rms"] = math.sqrt(sigma2)
+            noise_d["estimator"] += "; plus the recorded input's measurement noise through the model"
     where = analyse(pipe, sigma2, method)
     where["level"]["clipped_output"] = {end: {"value": v, "samples": int(m.sum()),
                                               "share": float(m.mean())} for end, (v, m) in clips.items()}
