@@ -16,7 +16,7 @@ import numpy as np
 
 from hasel.diagnose.augment import LINEAR, EffectFit, fit_drift_on_repeats, fit_family, joint_refine, linear_static, measured_clip
 from hasel.diagnose.context import _Context, _fixed, _pick, _raises, _State, _without, raised_resonance
-from hasel.diagnose.significance import _SEPARATING, block_test
+from hasel.diagnose.significance import _SEPARATING, block_test, white_z
 from hasel.effects.evidence import magnitude_evidence
 from hasel.effects.hysteresis import input_loop
 from hasel.effects.static_map import AFTER_HYST, AFTER_HYST_KNEE, fit_after_hysteresis, is_after_hysteresis
@@ -100,8 +100,7 @@ def _clip_check(ctx: _Context, st: _State) -> None:
         if measured_clip(others) is not None:
             base["saturation"] = measured_clip(others)
         _, m_without, e_without = ctx.scores(base)
-        z = float(np.sum(e_without ** 2 - st.e_ho ** 2)
-                  / (2.0 * math.sqrt(ctx.sigma2) * max(np.linalg.norm(e_without - st.e_ho), 1e-300)))
+        z = white_z(e_without, st.e_ho, ctx.sigma2)
         t_blk, z_col = ctx.held_out(e_without, st.e_ho)
         # the clip is seen directly (samples pile up on one value): held out, it must only help
         # beyond chance (one-sided 5 %), not pass the test that guards against invented effects

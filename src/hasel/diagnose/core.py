@@ -63,7 +63,7 @@ from hasel.diagnose.pool import pmap
 from hasel.diagnose.prep import prepare, rest_start
 from hasel.diagnose.setup_stages import (AT_BOUND_NOTE, _model_stage, _noise_stage, _nominal_model, at_shift_bound,
                                          grid_then_bounded, shift_range)
-from hasel.diagnose.significance import _alike, block_test, coloured_z
+from hasel.diagnose.significance import _alike, block_test, coloured_z, white_z
 from hasel.diagnose.wording import _evidence, unsettled_start_text
 from hasel.effects.drift import ABSORB, LEVEL_CARRIERS, TRAVEL, fit_level_forms
 from hasel.effects.evidence import magnitude_evidence
@@ -512,8 +512,7 @@ def _acceptance(ctx: _Context, st: _State, rnd: int, results: list[Candidate], b
     nominal_share = (mse_ho - m_ho) / max(st.mse_nom - sigma2, 1e-300)
     # against the noise floor: with white noise of variance sigma2 left in the current residual,
     # the validation SSE drop of a change delta has sd 2 sigma ||delta||
-    delta = st.e_ho - e_new
-    z = float(np.sum(st.e_ho ** 2 - e_new ** 2) / (2.0 * math.sqrt(sigma2) * max(np.linalg.norm(delta), 1e-300)))
+    z = white_z(st.e_ho, e_new, sigma2)
     dbic = -(st.mse_tr - m_tr) * ctx.n_tr / sigma2 + k * math.log(ctx.n_tr)
     need = opts.min_first_gain if rnd == 0 else opts.min_next_gain
     # a share of the nominal gap, or (smaller) if it explains nearly all that is left

@@ -11,12 +11,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.signal import lfilter
 
 from hasel.diagnose.augment import LINEAR
 from hasel.diagnose.options import DiagnoseOptions
 from hasel.effects.heldout import block_test, moving_average
 
-__all__ = ["block_test", "coloured_z"]
+__all__ = ["block_test", "coloured_z", "white_z", "ar_whitener", "whitened_scores"]
 
 
 def coloured_z(e_old: np.ndarray, e_new: np.ndarray, max_lag: int, slow_n: int = 0) -> float:
@@ -105,6 +106,14 @@ def _alike(results: list[tuple], eff_new: dict, e_new: np.ndarray, mse_ho: float
     return None
 
 
+def white_z(e_old: np.ndarray, e_new: np.ndarray, var: float) -> float:
+    """Paired z of the validation SSE drop ``e_old -> e_new`` against white noise of variance ``var`` (output unit
+    squared): with that noise a change ``delta`` of the prediction drops the SSE by a quantity of sd
+    ``2 sqrt(var) ||delta||``."""
+    return float(np.sum(e_old ** 2 - e_new ** 2)
+                 / (2.0 * math.sqrt(var) * max(float(np.linalg.norm(e_old - e_new)), 1e-300)))
+
+
 def ar_whitener(e: np.ndarray, labels: np.ndarray, max_order: int) -> np.ndarray:
     """Coefficients ``a`` (``a[0] = 1``) of the prediction-error filter ``A(q)`` of an AR model of ``e``.
 
@@ -150,8 +159,6 @@ def whitened_scores(e_old: np.ndarray, e_new: np.ndarray, labels: np.ndarray, a:
     through a feedback loop (the applied voltage carries the controller's reaction to past noise)
     earns nothing here, where the plain scores credit it.
     """
-    from scipy.signal import lfilter
-
     p = a.size - 1
     cuts = np.flatnonzero(np.diff(labels)) + 1
     wo, wn, lab = [], [], []
@@ -165,7 +172,4 @@ def whitened_scores(e_old: np.ndarray, e_new: np.ndarray, labels: np.ndarray, a:
         return 0.0, 0.0
     w_old, w_new, lab_w = np.concatenate(wo), np.concatenate(wn), np.unique(np.concatenate(lab), return_inverse=True)[1]
     t = block_test(w_old, w_new, lab_w, 0)
-    d = w_old - w_new
-    s2 = float(np.mean(w_new ** 2))
-    z = float(np.sum(w_old ** 2 - w_new ** 2) / (2.0 * math.sqrt(max(s2, 1e-300)) * max(float(np.linalg.norm(d)), 1e-300)))
-    return t, z
+    return t, white_z(w_old, w_new, max(float(np.mean(w_new ** 2)), 1e-300))
