@@ -10,7 +10,17 @@ import numpy as np
 
 from hasel.errors import BadInputError
 
-__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "reference_starts", "nrmse"]
+__all__ = ["StepMetrics", "step_metrics", "steps_from_sequence", "reference_starts", "nrmse", "robust_sd"]
+
+#: the median absolute deviation of a normal variable times this is its standard deviation
+MAD_TO_SD = 1.4826
+
+
+def robust_sd(x: np.ndarray) -> float:
+    """Standard deviation of ``x`` (its unit) from the median absolute deviation about the median:
+    ``1.4826 * median(|x - median(x)|)``, which outliers (steps, switches, spikes) barely move."""
+    x = np.asarray(x, dtype=float)
+    return float(MAD_TO_SD * np.median(np.abs(x - np.median(x))))
 
 
 def nrmse(y: np.ndarray, y_hat: np.ndarray, *, bias_free: bool = False) -> float:

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hasel.metrics import robust_sd
+
 __all__ = ["InputNoise", "input_noise", "SHARE_T_MIN", "SHARE_MIN", "SHARE_MAX"]
 
 #: t statistic the cross-correlation amplitude needs (above zero) [seen free_indep 127-146: the 40
@@ -47,8 +49,6 @@ SHARE_MIN = 0.5
 SHARE_MAX = 3.0
 #: the noise implied in the residual may exceed the residual's variance by this factor (estimation scatter)
 RESIDUAL_SLACK = 1.2
-#: robust scale to standard deviation for a normal variable
-_MAD = 1.4826
 
 
 @dataclass(frozen=True)
@@ -91,26 +91,22 @@ class InputNoise:
                 "reason": self.reason}
 
 
-def _robust_sd(x: np.ndarray) -> float:
-    return float(_MAD * np.median(np.abs(x - np.median(x))))
-
-
 def _switches(u: np.ndarray) -> np.ndarray:
     """First differences that are steps of the signal, not noise (bool, ``u.size - 1``)."""
     d1 = np.diff(u)
     c = float(np.median(d1))
-    s1 = _robust_sd(d1)
+    s1 = robust_sd(d1)
     jump = np.abs(d1 - c) > 6.0 * s1
     # many switches bias the robust scale up: once more on what is left
     if jump.any() and (~jump).sum() > 10:
-        jump = np.abs(d1 - c) > 5.0 * _robust_sd(d1[~jump])
+        jump = np.abs(d1 - c) > 5.0 * robust_sd(d1[~jump])
     return jump
 
 
 def _difference_noise(u: np.ndarray) -> tuple[int, float, np.ndarray, np.ndarray]:
     """Order ``k``, noise rms (input unit), the k-th difference ``w`` with switches zeroed, and its mask of
     samples kept."""
-    scales = [_robust_sd(np.diff(u, k)) / math.sqrt(math.comb(2 * k, k)) for k in (1, 2, 3, 4)]
+    scales = [robust_sd(np.diff(u, k)) / math.sqrt(math.comb(2 * k, k)) for k in (1, 2, 3, 4)]
     k = int(np.argmin(scales)) + 1
     d = np.diff(u, k)
     c = math.sqrt(math.comb(2 * k, k))

@@ -18,6 +18,7 @@ import numpy as np
 from scipy import signal
 
 from hasel.errors import BadInputError
+from hasel.metrics import robust_sd
 from hasel.validate import finite
 
 __all__ = ["Segment", "SkippedPart", "SegmentSearch", "find_segments", "segments_from_markers",
@@ -193,7 +194,7 @@ def find_segments(t_s: np.ndarray, u: np.ndarray, *, window_s: float | None = No
         min_step_v = float("inf") if min_step is None else float(min_step)
     else:
         ad = np.abs(d)
-        sig = 1.4826 * float(np.median(np.abs(d - np.median(d))))
+        sig = robust_sd(d)
         min_step_v = (max(6.0 * sig, 0.05 * float(ad.max())) if min_step is None
                       else finite("min_step", min_step))
         # every peak of |d| above the threshold: two steps closer than two windows (a short
