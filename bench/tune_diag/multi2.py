@@ -405,6 +405,9 @@ def _install_oracle() -> None:
     from itertools import permutations
 
     from hasel.diagnose import core
+    from hasel.diagnose.augment import fit_family, joint_refine
+    from hasel.diagnose.checks import _refit_rest
+    from hasel.diagnose.context import _fixed, _without
 
     orig = core._forward_selection
 
@@ -413,16 +416,16 @@ def _install_oracle() -> None:
         labels = _ORACLE.get("labels") or []
         if len(labels) < 2:
             return
-        fixed = {k: v for k, v in st.current.items() if core._fixed(k, v)}
+        fixed = {k: v for k, v in st.current.items() if _fixed(k, v)}
         best = None
         for order in permutations(labels):
             e = dict(fixed)
             for n in order:
-                f = core.fit_family(ctx.pipe, e, n)
+                f = fit_family(ctx.pipe, e, n)
                 if f is not None:
                     e[n] = f
             e = core._alternate(ctx, e, [n for n in order if n in e])
-            e = core.joint_refine(ctx.pipe, e, max_nfev=ctx.opts.joint_refine_nfev)
+            e = joint_refine(ctx.pipe, e, max_nfev=ctx.opts.joint_refine_nfev)
             sc = ctx.scores(e)
             if best is None or sc[0] < best[1][0]:
                 best = (e, sc)
@@ -432,7 +435,7 @@ def _install_oracle() -> None:
             if n not in e:
                 members[n] = None
                 continue
-            _, _, m_r, e_r = core._refit_rest(ctx, core._without(e, n))
+            _, _, m_r, e_r = _refit_rest(ctx, _without(e, n))
             t_blk, z_col = ctx.held_out(e_r, e_ho)
             members[n] = {"gain": round((m_r - m_ho) / m_r, 3) if m_r > 0 else 0.0, "t": round(t_blk, 1),
                           "z": round(z_col, 1)}
