@@ -111,3 +111,21 @@ def test_a_pinned_offset_is_kept_though_the_held_out_blocks_cannot_tell():
                for n in r.notes), r.notes
     assert c["max_db"] < 1.0 and c["max_deg"] < 3.0, c
     assert r.usable, r.reasons
+
+
+def test_a_lower_order_does_not_buy_its_tie_with_an_offset_within_noise_of_none():
+    """The paper chirp at 200 Hz on three offsets with pre-conditioning, zero-order hold, no timing offset, white
+    noise 10 um (designs.make_log seed 1). Order 5/6 fits the held-out data best; 4/5 ties with it only once a
+    timing offset is estimated, and that offset (-0.03 samples) is within two of its standard errors of none.
+    Kept (session 37 and before), 4/5 was 4.3 deg off P(s) at 15 Hz (5.9 deg on the first verification corpus's
+    id11); now the offset must be pinned, as any kept offset, and 5/6 stands: 0.6 deg."""
+    log = designs.make_log("paper_chirp", 200.0, seed=1, precondition=True)
+    r = identify(log.t_s, log.u_kv, log.y_mm, segments=log.meta["excitation_segments"], input_name="voltage_kv",
+                 output_name="stroke_mm")
+    c = r.paper_comparison()
+    assert (r.model.num.size - 1, r.model.den.size - 1) == (5, 6)
+    assert r.timing_offset_s == 0.0
+    assert any("ties with order 5/6 only with a timing offset within 2 standard errors of none" in n
+               for n in r.notes), r.notes
+    assert c["max_db"] < 0.3 and c["max_deg"] < 1.5, c
+    assert r.usable, r.reasons

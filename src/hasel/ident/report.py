@@ -234,7 +234,7 @@ def write_report(result: IdentResult, directory: str | Path) -> Path:
               + (" ..." if len(result.skipped) > 20 else "")]
     sm = result.static_map
     L += ["", "## Static map", "",
-          f"Degree {sm.degree} (leave-one-out), coefficients (descending powers): "
+          f"Degree {sm.degree} (leave-one-level-out), coefficients (descending powers): "
           f"{[float(f'{c:.6g}') for c in sm.coefficients]}; rms residual {sm.rmse:.3g} {result.output_unit}.", "",
           "![Static map](static_map.png)", "",
           "## Does the dynamics depend on the operating point?", "", result.dependence.summary, ""]

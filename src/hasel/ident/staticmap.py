@@ -1,8 +1,9 @@
 """The static map ``h_s(v_s)``: mean output against the operating point (paper eq. 12).
 
 Each operating point gives one point (mean input, mean output) over its data; a
-polynomial of low degree is fitted through them, its degree chosen by leave-one-out
-error (the held-out error of each point when the others are fitted), preferring the
+polynomial of low degree is fitted through them, its degree chosen by leave-one-level-out
+error (the held-out error of each level's points when the other levels are fitted; points
+within :data:`LEVEL_FRACTION` of the span of each other are one level), preferring the
 lower degree when two are within 25 %.
 """
 from __future__ import annotations
@@ -34,10 +35,10 @@ class StaticMap:
     rmse : float
         RMS residual of the fit at the points, output unit.
     loo_rmse : float
-        Leave-one-out RMS error of the chosen degree, output unit (``nan`` if too
+        Leave-one-level-out RMS error of the chosen degree, output unit (``nan`` if too
         few points).
     loo_by_degree : dict of int to float
-        Leave-one-out RMS error of every degree tried.
+        Leave-one-level-out RMS error of every degree tried.
     """
 
     offsets: np.ndarray
@@ -70,12 +71,24 @@ class StaticMap:
         }
 
 
-def _loo(x: np.ndarray, y: np.ndarray, deg: int) -> float:
+#: Points whose inputs lie within this fraction of the points' span of their neighbour are one level (set a
+#: priori, not tuned): repeats at an offset or a staircase's return to a level, left out together.
+LEVEL_FRACTION = 0.02
+
+
+def _levels(x: np.ndarray) -> np.ndarray:
+    """Level index of each point of the sorted inputs ``x``: a new level where the gap exceeds LEVEL_FRACTION."""
+    gaps = np.diff(x) > LEVEL_FRACTION * float(np.ptp(x))
+    return np.concatenate([[0], np.cumsum(gaps)]).astype(int)
+
+
+def _loo(x: np.ndarray, y: np.ndarray, deg: int, levels: np.ndarray) -> float:
+    """RMS error of the points of each level predicted by the polynomial of degree ``deg`` through the others."""
     err = []
-    for i in range(x.size):
-        m = np.arange(x.size) != i
+    for k in np.unique(levels):
+        m = levels != k
         c = np.polyfit(x[m], y[m], deg)
-        err.append(np.polyval(c, x[i]) - y[i])
+        err.extend(np.polyval(c, x[~m]) - y[~m])
     return float(np.sqrt(np.mean(np.square(err))))
 
 
@@ -95,9 +108,9 @@ def fit_static_map(offsets: Sequence[float] | np.ndarray, means: Sequence[float]
     Returns
     -------
     StaticMap
-        Degree 0 for one point, 1 for two (the line through them), else the degree
-        of least leave-one-out error up to ``min(max_degree, n - 2)``, the lower one
-        when within 25 %.
+        Degree 0 for one point, 1 for two levels (the line through them), else the
+        degree of least leave-one-level-out error up to ``min(max_degree, levels - 2)``,
+        the lower one when within 25 %.
 
     Raises
     ------
@@ -113,14 +126,18 @@ def fit_static_map(offsets: Sequence[float] | np.ndarray, means: Sequence[float]
     order = np.argsort(x)
     x, y = x[order], y[order]
     n_distinct = np.unique(np.round(x, 12)).size
+    levels = _levels(x) if n_distinct > 1 else np.zeros(x.size, int)
+    n_levels = int(levels[-1]) + 1
     loo: dict[int, float] = {}
     if n_distinct <= 1:
         deg = 0
-    elif n_distinct == 2:
+    elif n_levels <= 2:
         deg = 1
     else:
-        for d in range(0, min(max_degree, n_distinct - 2) + 1):
-            loo[d] = _loo(x, y, d)
+        # repeats at one level say how noisy a mean is, not how the map bends: leave whole levels out (a twin left
+        # in lets a curve through it look predictive; three chirps per offset chose a cubic for an LTI log)
+        for d in range(0, min(max_degree, n_levels - 2) + 1):
+            loo[d] = _loo(x, y, d, levels)
         best = min(loo.values())
         deg = min(d for d, e in loo.items() if e <= 1.25 * best)
     coef = np.polyfit(x, y, deg) if n_distinct > deg else np.array([float(np.mean(y))])
