@@ -1056,11 +1056,10 @@ def _reflect_unsupported_zeros(oe, band, u, y, rate, pieces, opts, block, notes)
                      f"goes from {oe.nrmse_heldout:.3g} to {oe2.nrmse_heldout:.3g} (the data show non-minimum "
                      "phase, e.g. a small delay between input and output)")
         return oe, True
-    if True:
-        notes.append(f"{int(np.count_nonzero(bad))} right-half-plane zero(s) outside the excited band mirrored into "
-                     f"the left half-plane (the data cannot show them) and the model refined again (held-out NRMSE {oe.nrmse_heldout:.3g} -> {oe2.nrmse_heldout:.3g})")
-        return oe2, False
-    return oe
+    notes.append(f"{int(np.count_nonzero(bad))} right-half-plane zero(s) outside the excited band mirrored into "
+                 f"the left half-plane (the data cannot show them) and the model refined again (held-out NRMSE "
+                 f"{oe.nrmse_heldout:.3g} -> {oe2.nrmse_heldout:.3g})")
+    return oe2, False
 
 
 #: Check 8 judges the model's error only below this fraction of the analysis rate: nearer the Nyquist
