@@ -1185,6 +1185,49 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
              options: IdentOptions | None = None, input_name: str = "input", output_name: str = "output",
              input_unit: str | None = None, output_unit: str | None = None,
              progress: Callable[[str], None] | None = None, **overrides: Any) -> IdentResult:
+    """Identify a SISO system from a log holding one or more operating points (see :func:`_identify_once`).
+
+    When the order chosen on held-out data is refused only because the data do not pin
+    its response (check 6: a parameter they cannot support, such as a nearly cancelling
+    pole-zero pair beyond the analysis rate's Nyquist frequency), the search is run again
+    below that order; the lower model replaces it when it passes every check and fits the
+    held-out data within ``_PAIRS_MARGIN`` (10 %) of the refused one. Same parameters and
+    result as :func:`_identify_once`.
+    """
+    kw = dict(segments=segments, options=options, input_name=input_name, output_name=output_name,
+              input_unit=input_unit, output_unit=output_unit, progress=progress)
+    res = _identify_once(t_s, u, y, **kw, **overrides)
+    opts = res.options
+    reasons = res.reasons
+    if (res.usable or opts.order is not None or res.validation is None or not reasons
+            or not all(r.startswith(_UNPINNED) for r in reasons)):
+        return res
+    n_p = int(np.asarray(res.model.den).size - 1)
+    if n_p <= 1:
+        return res
+    if progress is not None:
+        progress(f"order {int(np.asarray(res.model.num).size - 1)}/{n_p} refused (its response is not pinned by "
+                 f"the data): searching below it")
+    low = _identify_once(t_s, u, y, **kw, **{**overrides, "max_poles": n_p - 1})
+    if not (low.usable and low.validation is not None
+            and low.validation.nrmse <= (1.0 + _PAIRS_MARGIN) * res.validation.nrmse):
+        return res
+    n_low = (int(np.asarray(low.model.num).size - 1), int(np.asarray(low.model.den).size - 1))
+    note = (f"order {int(np.asarray(res.model.num).size - 1)}/{n_p} (chosen on held-out data) was refused: "
+            f"{reasons[0]}; order {n_low[0]}/{n_low[1]}, searched below it, passes every check and fits the held-out "
+            f"data within {100 * _PAIRS_MARGIN:g} % of it (NRMSE {low.validation.nrmse:.3g} against "
+            f"{res.validation.nrmse:.3g}): the data support it, it is kept")
+    return replace(low, notes=[note] + list(low.notes))
+
+
+#: Check 6's reason (hasel.ident.checks): the data do not pin the model's response.
+_UNPINNED = "the data pin the response only to"
+
+
+def _identify_once(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float, float]] | None = None,
+                   options: IdentOptions | None = None, input_name: str = "input", output_name: str = "output",
+                   input_unit: str | None = None, output_unit: str | None = None,
+                   progress: Callable[[str], None] | None = None, **overrides: Any) -> IdentResult:
     """Identify a SISO system from a log holding one or more operating points.
 
     Parameters
