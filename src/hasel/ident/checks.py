@@ -147,6 +147,9 @@ RESID_MAX_RUN_OCTAVES = 1.0
 #: gain below which the response is no longer judged (-20 dB, the roll-off; as check 5's floor).
 SPREAD_Z = 2.0
 SPREAD_FLOOR = 0.1
+#: How check 6's reason begins (the data do not pin the model's response); identify's fallback to a lower
+#: order looks for it.
+UNPINNED_REASON = "the data pin the response only to"
 #: Check 7 refuses when a tied rival differs by more than this many tolerances (a difference of one tolerance
 #: between two models that fit alike bounds neither's error by it; twice it, one of them is off by more).
 RIVAL_FACTOR = 2.0
@@ -469,7 +472,7 @@ def _spread(model: Any, spread: dict[str, Any], tol_db: float, tol_deg: float, r
         worse = np.maximum(u_db / tol_db, u_deg / tol_deg) / widen
         if np.max(worse) > 1.0:
             i = int(np.argmax(worse))
-            reasons.append(f"the data pin the response only to +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg at "
+            reasons.append(f"{UNPINNED_REASON} +-{u_db[i]:.2g} dB / +-{u_deg[i]:.2g} deg at "
                            f"{f[i]:.3g} Hz (95 %, the output-error fit's covariance over {span}; tolerance "
                            f"{tol_db * widen[i]:.2g} dB / {tol_deg * widen[i]:.2g} deg there)")
             fixes.append(f"excite more around {f[i]:.3g} Hz: a chirp or multisine from {f[i] / 2:.3g} to "

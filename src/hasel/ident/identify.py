@@ -53,7 +53,7 @@ from hasel.ident.freqresp import (FreqResp, detect_period, excited_band, fft_rat
                                   welch_plan)
 from hasel.ident.segments import Segment, SkippedPart, find_segments, segments_from_markers
 from hasel.ident.staticmap import StaticMap, fit_static_map
-from hasel.ident.checks import SPREAD_FLOOR, ModelCheck, check_model, inband_errors
+from hasel.ident.checks import SPREAD_FLOOR, UNPINNED_REASON, ModelCheck, check_model, inband_errors
 from hasel.ident.tffit import OrderScore, TFFit, TFModel, fit_tf_order, quality
 from hasel.ident.timefit import (EXACT_BLOCK_MIN, arx_start, interleaved, oe_fit, response_uncertainty,
                                  shift_standard_error, simulate_zoh)
@@ -947,10 +947,8 @@ def _lower_order_with_offset(candidates: list, chosen: tuple[int, int], best: fl
             keeps = o_hi.shift * o.shift > 0 and abs(o_hi.shift - o.shift) <= 0.5 * abs(o.shift)
             rival, what = False, f"{-raw:+.2f} samples"
             if keeps and not prefer:
-                # only then does it matter whether the offset is a sampling convention (its standard error costs a
-                # covariance: 1.4x the time of a 1 kHz paper chirp when computed always)
-                se = block * shift_standard_error(o, u, y, rate, pieces, hold=opts.input_hold, block=block,
-                                                  max_shift=max_shift, drift_s=opts.drift_knot_s)
+                # is the offset a sampling convention? (its standard error, computed above, in raw samples)
+                se = block * se0
                 near = min(_CONVENTIONS, key=lambda v: abs(raw - v))
                 rival = not (math.isfinite(se) and abs(raw - near) <= _CONVENTION_Z * se)
                 what += f" +- {se:.2g}, {'no ' if rival else ''}sampling convention"
@@ -1200,7 +1198,7 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
     opts = res.options
     reasons = res.reasons
     if (res.usable or opts.order is not None or res.validation is None or not reasons
-            or not all(r.startswith(_UNPINNED) for r in reasons)):
+            or not all(r.startswith(UNPINNED_REASON) for r in reasons)):
         return res
     n_p = int(np.asarray(res.model.den).size - 1)
     if n_p <= 1:
@@ -1218,10 +1216,6 @@ def identify(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float,
             f"data within {100 * _PAIRS_MARGIN:g} % of it (NRMSE {low.validation.nrmse:.3g} against "
             f"{res.validation.nrmse:.3g}): the data support it, it is kept")
     return replace(low, notes=[note] + list(low.notes))
-
-
-#: Check 6's reason (hasel.ident.checks): the data do not pin the model's response.
-_UNPINNED = "the data pin the response only to"
 
 
 def _identify_once(t_s: Any, u: Any, y: Any, *, segments: Sequence[tuple[float, float, float]] | None = None,
