@@ -24,6 +24,7 @@ the offline loop (:mod:`hasel.loop`) use the same objects.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -269,27 +270,34 @@ class TripMark:
     died: applied, they would put a stale voltage back on the actuator for another timeout.
 
     Decided on the requests' stamps (the time of the measurement they answer), with no
-    assumption that the stamps' clock is this node's: the last request fed before the trip was
-    measured at ``s`` and arrived at ``t`` (node clock); its latency ``t - s`` puts the trip,
-    sent at ``T``, at ``T - (t - s)`` on the stamps' clock, and a request stamped before that
-    was measured before the trip. Only the two clocks' rates need to agree (one machine, or
-    simulated time everywhere), not their offsets. Every executor gives the stamp (rclpy's
-    EventsExecutor has no reception time). Two guards keep it from holding 0 kV on a fresh
-    request: an unset stamp (0) counts as fresh, and so does any request handled more than
-    ``window_s`` (s, monotonic clock) after the trip.
+    assumption that the stamps' clock is this node's: a request measured at ``s`` (stamps'
+    clock) arrived at ``t`` (node clock), latency ``t - s`` = clock offset + transport delay.
+    The smallest latency of the last ``history`` requests bounds the offset from above, so the
+    trip, sent at ``T``, lies at or after ``T - min(t - s)`` on the stamps' clock, and a request
+    stamped before that was measured before the trip. The smallest, not the last: on a loaded
+    machine one late request (a CI run saw 39 ms through the chain) put the mark so early that
+    requests measured 23-39 ms before the trip passed as fresh. A request measured after the
+    trip always has a stamp above the mark, so none is ever dropped for being early. Only the
+    two clocks' rates need to agree (one machine, or simulated time everywhere), not their
+    offsets. Every executor gives the stamp (rclpy's EventsExecutor has no reception time).
+    Two guards keep it from holding 0 kV on a fresh request: an unset stamp (0) counts as
+    fresh, and so does any request handled more than ``window_s`` (s, monotonic clock) after
+    the trip.
     """
 
-    def __init__(self, window_s: float = 1.0) -> None:
+    def __init__(self, window_s: float = 1.0, history: int = 400) -> None:
         self.window_ns = int(positive("window_s", window_s) * 1e9)
-        self._last: tuple[float, float] | None = None  # (arrival, node clock s; stamp s) of the last fed request
+        # latencies (node clock - stamps' clock, s) of the last requests fed; 400 = 2 s at 200 Hz, short
+        # enough that a slow drift between two clocks of nearly one rate does not matter
+        self._latency: deque[float] = deque(maxlen=int(positive("history", history)))
         self.trip_stamp_s: float | None = None  # the trip on the stamps' clock, s
         self._trip_mono_ns = 0
 
     def fed(self, now_s: float, stamp_s: float) -> None:
-        """A request stamped ``stamp_s`` was applied at ``now_s`` (s): the latency reference; no trip pending."""
+        """A request stamped ``stamp_s`` was applied at ``now_s`` (s): a latency sample; no trip pending."""
         self.clear()
         if stamp_s > 0.0:
-            self._last = (float(now_s), float(stamp_s))
+            self._latency.append(float(now_s) - float(stamp_s))
 
     def clear(self) -> None:
         """A request was applied (a waveform, a pre-conditioning): no trip pending."""
@@ -298,9 +306,8 @@ class TripMark:
     def trip(self, now_s: float, mono_ns: int) -> None:
         """The watchdog's trip was sent at ``now_s`` (node clock, s) / ``mono_ns`` (monotonic, ns). Repeats
         of the 0 kV while still tripped keep the first mark."""
-        if self.trip_stamp_s is None and self._last is not None:
-            arrived, stamp = self._last
-            self.trip_stamp_s, self._trip_mono_ns = now_s - (arrived - stamp), int(mono_ns)
+        if self.trip_stamp_s is None and self._latency:
+            self.trip_stamp_s, self._trip_mono_ns = now_s - min(self._latency), int(mono_ns)
 
     def queued(self, stamp_s: float, mono_ns: int) -> bool:
         """True when a request stamped ``stamp_s`` (s), handled at ``mono_ns`` (monotonic, ns), was measured

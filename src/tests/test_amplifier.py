@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hasel.amplifier import HARD_CEILING_KV, AmplifierCore, HeldOutput, HvLimits, Reason, TripMark, Watchdog
-from hasel.errors import UnsafeParameterError
+from hasel.errors import BadInputError, UnsafeParameterError
 from hasel.faults import ERROR, WARN
 
 
@@ -139,3 +139,21 @@ def test_a_request_measured_before_a_trip_gives_zero_kv_and_does_not_feed_the_wa
     assert amp.poll(1.045)[0].reason == Reason.WATCHDOG
     assert amp.queued_request(1.046, 7.0)[1] is not None  # a new trip: a new notice
     assert not TripMark().queued(1.0, 0)  # never fed, never tripped
+
+
+def test_one_late_request_before_a_trip_does_not_let_older_queued_requests_through():
+    """The CI failure of session 38's landing: the last request before the trip came 39 ms after its
+    measurement (a loaded machine); requests measured 23-39 ms before the trip, handled after it, were
+    applied (2.7 kV) because the mark took the last latency. The smallest recent latency puts the mark
+    at the trip minus the transport floor."""
+    mark = TripMark(window_s=1.0)
+    for k in range(50):  # 200 Hz, 1-3 ms through the chain; stamps on a clock 100 s behind
+        mark.fed(900.0 + 0.005 * k, 800.0 + 0.005 * k - 0.001 - 0.002 * (k % 2))
+    mark.fed(900.270, 800.270 - 0.039)  # the late one
+    mark.trip(900.2889, mono_ns=5_000)
+    assert mark.trip_stamp_s == pytest.approx(800.2879)
+    # measured 25-41 ms after the late one's stamp, all before the trip: queued (the last-latency mark was 800.2499)
+    assert all(mark.queued(800.231 + d, 5_000 + 400_000) for d in (0.019, 0.027, 0.035))
+    assert not mark.queued(800.2889, 5_000 + 400_000)  # measured at the trip itself: fresh
+    with pytest.raises(BadInputError):
+        TripMark(history=0)
