@@ -15,6 +15,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from children import default_sigint
 from hasel_ros.rosutil import from_stamp
 from hasel_msgs.msg import ControllerState, VoltageCommand
 
@@ -29,10 +30,14 @@ EXES = {
 }
 
 
-def start(name: str) -> subprocess.Popen:
+def start(name: str, logs: Path) -> subprocess.Popen:
+    """Start one node; its stderr goes to a file in ``logs`` (a pipe nobody reads fills up, 64 KiB of
+    warnings later, and blocks the node: starved mid-test, deaf to SIGINT at teardown)."""
     pkg, exe, params = EXES[name]
-    return subprocess.Popen([str(INSTALL / pkg / "lib" / pkg / exe), "--ros-args", *params],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=dict(os.environ))
+    with open(logs / f"{name}.log", "ab") as err:
+        return subprocess.Popen([str(INSTALL / pkg / "lib" / pkg / exe), "--ros-args", *params],
+                                stdout=subprocess.DEVNULL, stderr=err, env=dict(os.environ),
+                                preexec_fn=default_sigint)  # teardown's SIGINT must reach them
 
 
 class Probe:
@@ -89,10 +94,10 @@ class Probe:
 
 
 @pytest.fixture
-def loop():
-    procs = {name: start(name) for name in EXES}
+def loop(tmp_path):
+    procs = {name: start(name, tmp_path) for name in EXES}
     probe = Probe()
-    yield procs, probe
+    yield procs, probe, tmp_path
     probe.close()
     for p in procs.values():
         if p.poll() is None:
@@ -110,7 +115,7 @@ def running(probe: Probe, since: float = 0.0) -> bool:
 
 
 def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
-    procs, probe = loop
+    procs, probe, logs = loop
     probe.wait(lambda: running(probe), 60, "the loop to run")
     # the amplifier stamps its own trips with its clock, the wall clock of this machine: a trip stamped after the
     # kill is the kill's (a loaded machine may trip and resume before it, and the probe may receive that late)
@@ -142,13 +147,13 @@ def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
     after = probe.applied[trip():]
     assert all(kv == 0.0 for _, kv, _ in after), after[:5]
     t_restart = probe.applied[-1][0]
-    procs["controller"] = start("controller")
+    procs["controller"] = start("controller", logs)
     probe.wait(lambda: running(probe, t_restart), 60, "control to resume after the restart")
 
 
 @pytest.mark.parametrize("victim", ["driver", "plant"])
 def test_losing_the_sensor_path_is_noticed_and_ends_at_zero_kv(loop, victim):
-    procs, probe = loop
+    procs, probe, _ = loop
     # the probe must be matched by the controller before the kill: a fault said to no reader
     # is lost (discovery on a loaded machine took > 20 s once), though it is restated each second
     probe.wait(lambda: running(probe) and probe.states, 60, "the loop to run and the controller's state")

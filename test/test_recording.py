@@ -11,18 +11,13 @@ from mcap_ros2.decoder import DecoderFactory
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
 
+from children import default_sigint
 from hasel_driver.driver_node import StrainDriverNode
 from hasel_driver.filter_node import LowPassNode
 from hasel_ros.rosutil import topic_qos
 from hasel_msgs.msg import Stroke
 from hasel_sysid.replay import Replayer, read_raw
 from hasel_sysid.steps import run_steps
-
-
-def default_sigint() -> None:
-    """In the child: SIGINT back to its default. A test run started in a script's background has SIGINT
-    ignored, and children inherit that (the convention the commands keep); these tests send it on purpose."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 @pytest.fixture(scope="module")

@@ -15,14 +15,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from children import default_sigint
+
 ROOT = Path(__file__).resolve().parents[1]
 HASEL = str(ROOT / ".venv" / "bin" / "hasel")
-
-
-def default_sigint() -> None:
-    """In the child: SIGINT back to its default. A test run started in a script's background has SIGINT
-    ignored, and children inherit that (the convention the commands keep); these tests send it on purpose."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _env() -> dict[str, str]:
