@@ -12,8 +12,14 @@ setup:
 demo: setup
 	$(HASEL) demo
 
+# Tests run in parallel (pytest-xdist, one worker per core up to 8, each file on one worker, each worker in
+# its own ROS domain), then the few that assert on wall-clock timing run alone, so no neighbour starves them.
+TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ "$$n" -gt 8 ] && n=8; echo $$n)
+
 test: setup core-without-ros
-	$(HASEL) env -- $(VENV)/bin/python -m pytest -q $(PYTEST_ARGS) src/tests test
+	$(HASEL) env -- $(VENV)/bin/python -m pytest -q -n $(TEST_JOBS) --dist loadfile -m "not wallclock" \
+		$(PYTEST_ARGS) src/tests test
+	$(HASEL) env -- $(VENV)/bin/python -m pytest -q -m wallclock $(PYTEST_ARGS) test
 
 # The core library in a venv that has no ros-* package at all: it must import and run.
 core-without-ros:

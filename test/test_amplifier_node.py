@@ -18,6 +18,8 @@ from hasel_control.amplifier_node import HvAmplifierNode
 from hasel_ros.rosutil import to_stamp, topic_qos
 from hasel_msgs.msg import SampleBatch, VoltageCommand
 
+pytestmark = pytest.mark.wallclock  # asserts on wall-clock timing: run alone (Makefile)
+
 
 class Harness:
     """An amplifier node and a test node in their own context, spun on demand."""

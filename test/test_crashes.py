@@ -19,6 +19,8 @@ from children import default_sigint
 from hasel_ros.rosutil import from_stamp
 from hasel_msgs.msg import ControllerState, VoltageCommand
 
+pytestmark = pytest.mark.wallclock  # asserts on wall-clock timing: run alone (Makefile)
+
 INSTALL = Path(__file__).resolve().parents[1] / "install"
 EXES = {
     "plant": ("sim_plant", "plant", ["-p", "clock_mode:=wall"]),
@@ -138,7 +140,15 @@ def test_controller_crash_gives_zero_kv_and_restart_resumes(loop):
     # the measurements' times, so stamp gaps add the chain's latency (a likely reading of a 1 s gap
     # seen once on a loaded machine; it did not reproduce).
     age = float(probe.values[trip_diag()]["command_age_s"])
-    assert 3 * 0.005 < age <= 5 * 0.005 + 0.01
+    # seen twice (a loaded machine in session 16, an idle one right after the parallel tests in session 39):
+    # 1.005 s, two of the node's 0.5 s spin backstops; not reproduced in 20 runs alone. The message keeps
+    # what the probe saw around the trip, to tell a late watchdog timer from a lost notice next time.
+    i = trip()
+    amp_diags = [(d, round(t, 4), v) for d, t, v in zip(probe.diags, probe.diag_stamps, probe.values)
+                 if "limited" in d or "dropped" in d]
+    assert 3 * 0.005 < age <= 5 * 0.005 + 0.01, (
+        f"watchdog age {age} s; kill at {t_kill:.4f}; applied around the trip {probe.applied[max(0, i - 6):i + 4]}; "
+        f"amplifier diagnostics {amp_diags[-6:]}")
     probe.spin(0.1)
     # nothing after the trip but 0 kV: requests of the dead controller still queued at the amplifier (it may be
     # starved on a loaded machine, and handles its timer first) were measured before the trip and are dropped

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import time
 
+import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
 from sim_plant.plant_node import PlantNode
+
+pytestmark = pytest.mark.wallclock  # asserts on wall-clock timing: run alone (Makefile)
 
 
 def spin_until(ex, cond, timeout_s: float) -> None:

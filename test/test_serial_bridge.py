@@ -16,6 +16,8 @@ from hasel_ros.rosutil import topic_qos
 from hasel_driver.serial_node import SerialBridgeNode
 from hasel_msgs.msg import SensorTiming, VoltageCommand
 
+pytestmark = pytest.mark.wallclock  # asserts on wall-clock timing: run alone (Makefile)
+
 
 class FakeMcu(threading.Thread):
     """Plays the firmware on the master side of a pty: 200 Hz timing frames, V/Z/H handling."""
