@@ -16,10 +16,11 @@ demo: setup
 # its own ROS domain), then the few that assert on wall-clock timing run alone, so no neighbour starves them.
 TEST_JOBS ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ "$$n" -gt 8 ] && n=8; echo $$n)
 
+# (pytest's exit code 5, no test selected, is not a failure: PYTEST_ARGS="-k ..." may pick from one part only)
 test: setup core-without-ros
 	$(HASEL) env -- $(VENV)/bin/python -m pytest -q -n $(TEST_JOBS) --dist loadfile -m "not wallclock" \
-		$(PYTEST_ARGS) src/tests test
-	$(HASEL) env -- $(VENV)/bin/python -m pytest -q -m wallclock $(PYTEST_ARGS) test
+		$(PYTEST_ARGS) src/tests test || [ $$? -eq 5 ]
+	$(HASEL) env -- $(VENV)/bin/python -m pytest -q -m wallclock $(PYTEST_ARGS) test || [ $$? -eq 5 ]
 
 # The core library in a venv that has no ros-* package at all: it must import and run.
 core-without-ros:

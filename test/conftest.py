@@ -13,7 +13,6 @@ import matplotlib
 matplotlib.use("Agg")
 
 
-
 def _domain_id() -> int:
     """This test process's ROS domain, 1-100: from the process id, or under pytest-xdist one per worker
     (workers of one run share a base drawn from the run's id and never share a domain)."""
